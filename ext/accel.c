@@ -1,0 +1,663 @@
+/*
+ * Accel: an Embree BVH over one triangle mesh, queried with whole NumPy
+ * arrays of rays.
+ *
+ * Rays come in as two (3, N) arrays (origins, directions; float32 or float64,
+ * any strides) plus tmin/tmax (scalars or (N,) arrays).  Closest-hit queries
+ * are packed into 16-wide SoA packets for rtcIntersect16; occlusion queries
+ * call rtcOccluded1 per ray (faster on incoherent rays, as measured by
+ * benchmarks/traversal.py).  Both run on a configurable number of threads with
+ * the GIL released.  Work is handed out in
+ * chunks through an atomic counter, so threads that draw cheap rays take more.
+ *
+ * Invalid rays (NaN or infinite origin or direction, zero direction, NaN or
+ * negative tmin, NaN tmax) are never traced: the call raises ValueError naming
+ * the first such ray.
+ */
+#include "native.h"
+
+#define NPY_NO_DEPRECATED_API NPY_2_0_API_VERSION
+#define NO_IMPORT_ARRAY
+#define PY_ARRAY_UNIQUE_SYMBOL pathspace_native_ARRAY_API
+#include <numpy/arrayobject.h>
+
+#include <math.h>
+#include <pthread.h>
+#include <sched.h>
+#include <stdatomic.h>
+#include <stdint.h>
+#include <string.h>
+#include <unistd.h>
+
+#define PACKET 16
+#define CHUNK_RAYS 512             /* rays handed to a thread at a time */
+#define MIN_RAYS_PER_THREAD 4096   /* below this, extra threads cost more than they save */
+
+typedef struct {
+    PyObject_HEAD
+    RTCScene scene;
+    Py_ssize_t n_vertices;
+    Py_ssize_t n_triangles;
+    int threads;
+} PsAccel;
+
+int ps_default_thread_count(void)
+{
+    cpu_set_t set;
+    if (sched_getaffinity(0, sizeof(set), &set) == 0) {
+        int n = CPU_COUNT(&set);
+        if (n > 0)
+            return n;
+    }
+    long n = sysconf(_SC_NPROCESSORS_ONLN);
+    return n > 0 ? (int)n : 1;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Views of the query arrays                                                 */
+
+typedef struct {
+    const char *base;
+    npy_intp stride_comp; /* bytes between x, y and z */
+    npy_intp stride_ray;  /* bytes between consecutive rays */
+    int is_double;
+} Vec3View;
+
+typedef struct {
+    const char *base; /* NULL for a scalar */
+    npy_intp stride;
+    int is_double;
+    double scalar;
+} ScalarView;
+
+static inline double read_value(const char *p, int is_double)
+{
+    return is_double ? *(const double *)p : (double)*(const float *)p;
+}
+
+static inline double vec3_get(const Vec3View *v, npy_intp ray, int comp)
+{
+    return read_value(v->base + comp * v->stride_comp + ray * v->stride_ray, v->is_double);
+}
+
+static inline double scalar_get(const ScalarView *v, npy_intp ray)
+{
+    return v->base ? read_value(v->base + ray * v->stride, v->is_double) : v->scalar;
+}
+
+static int make_vec3_view(PyObject *obj, const char *name, Vec3View *view, npy_intp *n_out)
+{
+    if (!PyArray_Check(obj)) {
+        PyErr_Format(PyExc_TypeError, "%s must be a NumPy array of shape (3, N), got %s", name,
+                     Py_TYPE(obj)->tp_name);
+        return -1;
+    }
+    PyArrayObject *a = (PyArrayObject *)obj;
+    int type = PyArray_TYPE(a);
+    if (PyArray_NDIM(a) != 2 || PyArray_DIM(a, 0) != 3) {
+        PyErr_Format(PyExc_ValueError, "%s must have shape (3, N) (one row per coordinate), got ndim=%d%s",
+                     name, PyArray_NDIM(a),
+                     PyArray_NDIM(a) == 2 && PyArray_DIM(a, 1) == 3 ? " with shape (N, 3): transpose it" : "");
+        return -1;
+    }
+    if ((type != NPY_FLOAT && type != NPY_DOUBLE) || !PyArray_ISNOTSWAPPED(a)) {
+        PyErr_Format(PyExc_TypeError, "%s must be float32 or float64 in native byte order", name);
+        return -1;
+    }
+    view->base = PyArray_BYTES(a);
+    view->stride_comp = PyArray_STRIDE(a, 0);
+    view->stride_ray = PyArray_STRIDE(a, 1);
+    view->is_double = type == NPY_DOUBLE;
+    *n_out = PyArray_DIM(a, 1);
+    return 0;
+}
+
+static int make_scalar_view(PyObject *obj, const char *name, npy_intp n, ScalarView *view)
+{
+    view->base = NULL;
+    view->stride = 0;
+    view->is_double = 1;
+    if (PyArray_Check(obj) && PyArray_NDIM((PyArrayObject *)obj) == 1) {
+        PyArrayObject *a = (PyArrayObject *)obj;
+        int type = PyArray_TYPE(a);
+        if ((type != NPY_FLOAT && type != NPY_DOUBLE) || !PyArray_ISNOTSWAPPED(a)) {
+            PyErr_Format(PyExc_TypeError, "%s must be float32 or float64 in native byte order", name);
+            return -1;
+        }
+        if (PyArray_DIM(a, 0) != n) {
+            PyErr_Format(PyExc_ValueError, "%s has %zd entries but there are %zd rays", name,
+                         (Py_ssize_t)PyArray_DIM(a, 0), (Py_ssize_t)n);
+            return -1;
+        }
+        view->base = PyArray_BYTES(a);
+        view->stride = PyArray_STRIDE(a, 0);
+        view->is_double = type == NPY_DOUBLE;
+        return 0;
+    }
+    if (PyArray_Check(obj) && PyArray_NDIM((PyArrayObject *)obj) > 1) {
+        PyErr_Format(PyExc_ValueError, "%s must be a scalar or an array of shape (N,)", name);
+        return -1;
+    }
+    double value = PyFloat_AsDouble(obj);
+    if (value == -1.0 && PyErr_Occurred()) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "%s must be a number or an array of shape (N,), got %s", name,
+                     Py_TYPE(obj)->tp_name);
+        return -1;
+    }
+    view->scalar = value;
+    return 0;
+}
+
+/* ------------------------------------------------------------------------ */
+/* The threaded query                                                        */
+
+typedef struct {
+    RTCScene scene;
+    int occlusion_only;
+    npy_intp n;
+    Vec3View org, dir;
+    ScalarView tmin, tmax;
+    /* outputs */
+    float *t, *u, *v, *ng;  /* ng: (3, N) contiguous, or NULL */
+    int32_t *prim;
+    npy_bool *occluded;
+    /* shared state */
+    atomic_llong next_ray;
+    atomic_llong first_bad;
+} Query;
+
+/* Ray i as float32 {org xyz, tnear, dir xyz, tfar}; returns 0 if the ray is invalid. */
+static inline int read_ray(const Query *q, npy_intp i, float r[8])
+{
+    double ox = vec3_get(&q->org, i, 0), oy = vec3_get(&q->org, i, 1), oz = vec3_get(&q->org, i, 2);
+    double dx = vec3_get(&q->dir, i, 0), dy = vec3_get(&q->dir, i, 1), dz = vec3_get(&q->dir, i, 2);
+    double t0 = scalar_get(&q->tmin, i), t1 = scalar_get(&q->tmax, i);
+    if (!(isfinite(ox) && isfinite(oy) && isfinite(oz) && isfinite(dx) && isfinite(dy) && isfinite(dz)))
+        return 0;
+    if (dx == 0.0 && dy == 0.0 && dz == 0.0)
+        return 0;
+    if (!(t0 >= 0.0) || !isfinite(t0) || isnan(t1))
+        return 0;
+    r[0] = (float)ox;
+    r[1] = (float)oy;
+    r[2] = (float)oz;
+    r[3] = (float)t0;
+    r[4] = (float)dx;
+    r[5] = (float)dy;
+    r[6] = (float)dz;
+    r[7] = t1 > 3.0e38 ? INFINITY : (float)t1;
+    return 1;
+}
+
+static void note_bad_ray(Query *q, npy_intp i)
+{
+    long long current = atomic_load(&q->first_bad);
+    while ((long long)i < current && !atomic_compare_exchange_weak(&q->first_bad, &current, (long long)i)) {
+    }
+}
+
+/* Occlusion: one rtcOccluded1 call per ray.  On incoherent rays it measured
+ * faster than rtcOccluded16 (benchmarks/traversal.py), while closest-hit
+ * queries are fastest in 16-wide packets. */
+static void occlude_range(Query *q, npy_intp begin, npy_intp end)
+{
+    struct RTCRay ray;
+    float r[8];
+    for (npy_intp i = begin; i < end; ++i) {
+        if (!read_ray(q, i, r)) {
+            note_bad_ray(q, i);
+            q->occluded[i] = 0;
+            continue;
+        }
+        ray.org_x = r[0];
+        ray.org_y = r[1];
+        ray.org_z = r[2];
+        ray.tnear = r[3];
+        ray.dir_x = r[4];
+        ray.dir_y = r[5];
+        ray.dir_z = r[6];
+        ray.tfar = r[7];
+        ray.time = 0.0f;
+        ray.mask = 0xFFFFFFFFu;
+        ray.id = 0;
+        ray.flags = 0;
+        ps_embree.rtcOccluded1(q->scene, &ray, NULL);
+        q->occluded[i] = ray.tfar < 0.0f; /* Embree sets tfar to -inf on occlusion */
+    }
+}
+
+static void intersect_range(Query *q, npy_intp begin, npy_intp end)
+{
+    struct RTCRayHit16 rh;
+    int valid[PACKET];
+    for (npy_intp p = begin; p < end; p += PACKET) {
+        int count = (int)(end - p < PACKET ? end - p : PACKET);
+        int any = 0;
+        for (int k = 0; k < PACKET; ++k) {
+            valid[k] = 0;
+            if (k < count) {
+                float r[8];
+                if (read_ray(q, p + k, r)) {
+                    rh.ray.org_x[k] = r[0];
+                    rh.ray.org_y[k] = r[1];
+                    rh.ray.org_z[k] = r[2];
+                    rh.ray.tnear[k] = r[3];
+                    rh.ray.dir_x[k] = r[4];
+                    rh.ray.dir_y[k] = r[5];
+                    rh.ray.dir_z[k] = r[6];
+                    rh.ray.tfar[k] = r[7];
+                    rh.ray.time[k] = 0.0f;
+                    rh.ray.mask[k] = 0xFFFFFFFFu;
+                    rh.ray.id[k] = (unsigned int)k;
+                    rh.ray.flags[k] = 0;
+                    valid[k] = -1;
+                    any = 1;
+                    rh.hit.geomID[k] = PS_RTC_INVALID_GEOMETRY_ID;
+                    rh.hit.primID[k] = PS_RTC_INVALID_GEOMETRY_ID;
+                    rh.hit.instID[0][k] = PS_RTC_INVALID_GEOMETRY_ID;
+                } else {
+                    note_bad_ray(q, p + k);
+                }
+            }
+        }
+        if (any)
+            ps_embree.rtcIntersect16(valid, q->scene, &rh, NULL);
+        for (int k = 0; k < count; ++k) {
+            npy_intp i = p + k;
+            if (valid[k] && rh.hit.geomID[k] != PS_RTC_INVALID_GEOMETRY_ID) {
+                q->t[i] = rh.ray.tfar[k];
+                q->prim[i] = (int32_t)rh.hit.primID[k];
+                q->u[i] = rh.hit.u[k];
+                q->v[i] = rh.hit.v[k];
+                if (q->ng) {
+                    q->ng[i] = rh.hit.Ng_x[k];
+                    q->ng[q->n + i] = rh.hit.Ng_y[k];
+                    q->ng[2 * q->n + i] = rh.hit.Ng_z[k];
+                }
+            } else {
+                q->t[i] = INFINITY;
+                q->prim[i] = -1;
+                q->u[i] = 0.0f;
+                q->v[i] = 0.0f;
+                if (q->ng) {
+                    q->ng[i] = 0.0f;
+                    q->ng[q->n + i] = 0.0f;
+                    q->ng[2 * q->n + i] = 0.0f;
+                }
+            }
+        }
+    }
+}
+
+static void *trace_worker(void *arg)
+{
+    Query *q = (Query *)arg;
+    for (;;) {
+        long long begin = atomic_fetch_add(&q->next_ray, CHUNK_RAYS);
+        if (begin >= (long long)q->n)
+            break;
+        long long end = begin + CHUNK_RAYS < (long long)q->n ? begin + CHUNK_RAYS : (long long)q->n;
+        if (q->occlusion_only)
+            occlude_range(q, (npy_intp)begin, (npy_intp)end);
+        else
+            intersect_range(q, (npy_intp)begin, (npy_intp)end);
+    }
+    return NULL;
+}
+
+static void run_query(Query *q, int threads)
+{
+    npy_intp max_useful = q->n / MIN_RAYS_PER_THREAD;
+    if (threads > max_useful)
+        threads = (int)(max_useful > 1 ? max_useful : 1);
+    pthread_t ids[256];
+    if (threads > 256)
+        threads = 256;
+    int started = 0;
+    for (int k = 1; k < threads; ++k) {
+        if (pthread_create(&ids[started], NULL, trace_worker, q) == 0)
+            ++started;
+    }
+    trace_worker(q);
+    for (int k = 0; k < started; ++k)
+        pthread_join(ids[k], NULL);
+}
+
+static PyObject *describe_bad_ray(const Query *q, npy_intp i)
+{
+    double o[3], d[3];
+    for (int c = 0; c < 3; ++c) {
+        o[c] = vec3_get(&q->org, i, c);
+        d[c] = vec3_get(&q->dir, i, c);
+    }
+    double t0 = scalar_get(&q->tmin, i), t1 = scalar_get(&q->tmax, i);
+    char text[512];
+    const char *why = "its origin or direction is not finite";
+    if (isfinite(o[0]) && isfinite(o[1]) && isfinite(o[2]) && isfinite(d[0]) && isfinite(d[1]) && isfinite(d[2])) {
+        if (d[0] == 0.0 && d[1] == 0.0 && d[2] == 0.0)
+            why = "its direction is the zero vector";
+        else if (!(t0 >= 0.0) || !isfinite(t0))
+            why = "tmin must be finite and >= 0";
+        else
+            why = "tmax is NaN";
+    }
+    snprintf(text, sizeof(text),
+             "invalid ray %zd: %s (origin=(%g, %g, %g), direction=(%g, %g, %g), tmin=%g, tmax=%g)",
+             (Py_ssize_t)i, why, o[0], o[1], o[2], d[0], d[1], d[2], t0, t1);
+    PyErr_SetString(PyExc_ValueError, text);
+    return NULL;
+}
+
+static int parse_query(PsAccel *self, PyObject *args, PyObject *kwargs, Query *q, int *threads,
+                       int *normals, int occlusion_only)
+{
+    static char *kwlist_hit[] = {"origins", "directions", "tmin", "tmax", "threads", "normals", NULL};
+    static char *kwlist_occ[] = {"origins", "directions", "tmin", "tmax", "threads", NULL};
+    PyObject *org, *dir, *tmin = NULL, *tmax = NULL;
+    *threads = 0;
+    *normals = 1;
+    int ok = occlusion_only
+                 ? PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OO$i:occluded", kwlist_occ, &org, &dir, &tmin,
+                                               &tmax, threads)
+                 : PyArg_ParseTupleAndKeywords(args, kwargs, "OO|OO$ip:intersect", kwlist_hit, &org, &dir, &tmin,
+                                               &tmax, threads, normals);
+    if (!ok)
+        return -1;
+    if (self->scene == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "Accel was not initialised");
+        return -1;
+    }
+    npy_intp n_org, n_dir;
+    if (make_vec3_view(org, "origins", &q->org, &n_org) < 0 || make_vec3_view(dir, "directions", &q->dir, &n_dir) < 0)
+        return -1;
+    if (n_org != n_dir) {
+        PyErr_Format(PyExc_ValueError, "origins has %zd rays but directions has %zd", (Py_ssize_t)n_org,
+                     (Py_ssize_t)n_dir);
+        return -1;
+    }
+    q->n = n_org;
+    if (tmin == NULL) {
+        q->tmin.base = NULL;
+        q->tmin.scalar = 0.0;
+    } else if (make_scalar_view(tmin, "tmin", q->n, &q->tmin) < 0) {
+        return -1;
+    }
+    if (tmax == NULL) {
+        q->tmax.base = NULL;
+        q->tmax.scalar = INFINITY;
+    } else if (make_scalar_view(tmax, "tmax", q->n, &q->tmax) < 0) {
+        return -1;
+    }
+    if (*threads < 0) {
+        PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: the Accel's default), got %d", *threads);
+        return -1;
+    }
+    if (*threads == 0)
+        *threads = self->threads;
+    q->scene = self->scene;
+    q->occlusion_only = occlusion_only;
+    atomic_init(&q->next_ray, 0);
+    atomic_init(&q->first_bad, LLONG_MAX);
+    return 0;
+}
+
+static PyObject *Accel_intersect(PsAccel *self, PyObject *args, PyObject *kwargs)
+{
+    Query q;
+    memset(&q, 0, sizeof(q));
+    int threads, normals;
+    if (parse_query(self, args, kwargs, &q, &threads, &normals, 0) < 0)
+        return NULL;
+    npy_intp n = q.n, dims_ng[2] = {3, n};
+    PyArrayObject *t = (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_FLOAT);
+    PyArrayObject *prim = (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_INT32);
+    PyArrayObject *u = (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_FLOAT);
+    PyArrayObject *v = (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_FLOAT);
+    PyArrayObject *ng = normals ? (PyArrayObject *)PyArray_SimpleNew(2, dims_ng, NPY_FLOAT) : NULL;
+    if (!t || !prim || !u || !v || (normals && !ng))
+        goto fail;
+    q.t = (float *)PyArray_DATA(t);
+    q.prim = (int32_t *)PyArray_DATA(prim);
+    q.u = (float *)PyArray_DATA(u);
+    q.v = (float *)PyArray_DATA(v);
+    q.ng = ng ? (float *)PyArray_DATA(ng) : NULL;
+    Py_BEGIN_ALLOW_THREADS
+    run_query(&q, threads);
+    Py_END_ALLOW_THREADS
+    if (atomic_load(&q.first_bad) != LLONG_MAX) {
+        describe_bad_ray(&q, (npy_intp)atomic_load(&q.first_bad));
+        goto fail;
+    }
+    if (ng == NULL) {
+        Py_INCREF(Py_None);
+        ng = (PyArrayObject *)Py_None;
+    }
+    return Py_BuildValue("(NNNNN)", t, prim, u, v, ng);
+fail:
+    Py_XDECREF(t);
+    Py_XDECREF(prim);
+    Py_XDECREF(u);
+    Py_XDECREF(v);
+    Py_XDECREF(ng);
+    return NULL;
+}
+
+static PyObject *Accel_occluded(PsAccel *self, PyObject *args, PyObject *kwargs)
+{
+    Query q;
+    memset(&q, 0, sizeof(q));
+    int threads, normals;
+    if (parse_query(self, args, kwargs, &q, &threads, &normals, 1) < 0)
+        return NULL;
+    npy_intp n = q.n;
+    PyArrayObject *out = (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_BOOL);
+    if (!out)
+        return NULL;
+    q.occluded = (npy_bool *)PyArray_DATA(out);
+    Py_BEGIN_ALLOW_THREADS
+    run_query(&q, threads);
+    Py_END_ALLOW_THREADS
+    if (atomic_load(&q.first_bad) != LLONG_MAX) {
+        Py_DECREF(out);
+        return describe_bad_ray(&q, (npy_intp)atomic_load(&q.first_bad));
+    }
+    return (PyObject *)out;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Construction                                                              */
+
+static PyArrayObject *require_table(PyObject *obj, const char *name, int type, const char *type_name)
+{
+    if (!PyArray_Check(obj)) {
+        PyErr_Format(PyExc_TypeError, "%s must be a NumPy %s array of shape (M, 3), got %s", name, type_name,
+                     Py_TYPE(obj)->tp_name);
+        return NULL;
+    }
+    PyArrayObject *a = (PyArrayObject *)obj;
+    if (PyArray_TYPE(a) != type || !PyArray_ISNOTSWAPPED(a)) {
+        PyErr_Format(PyExc_TypeError, "%s must have dtype %s, got %R", name, type_name,
+                     (PyObject *)PyArray_DESCR(a));
+        return NULL;
+    }
+    if (PyArray_NDIM(a) != 2 || PyArray_DIM(a, 1) != 3) {
+        PyErr_Format(PyExc_ValueError, "%s must have shape (M, 3), got ndim=%d", name, PyArray_NDIM(a));
+        return NULL;
+    }
+    if (!PyArray_IS_C_CONTIGUOUS(a)) {
+        PyErr_Format(PyExc_ValueError, "%s must be C-contiguous (use numpy.ascontiguousarray)", name);
+        return NULL;
+    }
+    return a;
+}
+
+static int Accel_init(PsAccel *self, PyObject *args, PyObject *kwargs)
+{
+    static char *kwlist[] = {"vertices", "indices", "threads", NULL};
+    PyObject *vobj, *iobj;
+    int threads = 0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OO|$i:Accel", kwlist, &vobj, &iobj, &threads))
+        return -1;
+    if (ps_require_embree() < 0)
+        return -1;
+    if (self->scene != NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "Accel is already initialised");
+        return -1;
+    }
+    if (threads < 0) {
+        PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all available cores), got %d", threads);
+        return -1;
+    }
+    PyArrayObject *verts = require_table(vobj, "vertices", NPY_FLOAT, "float32");
+    if (!verts)
+        return -1;
+    PyArrayObject *tris = require_table(iobj, "indices", NPY_UINT32, "uint32");
+    if (!tris)
+        return -1;
+    npy_intp nv = PyArray_DIM(verts, 0), nt = PyArray_DIM(tris, 0);
+    const float *vdata = (const float *)PyArray_DATA(verts);
+    const uint32_t *idata = (const uint32_t *)PyArray_DATA(tris);
+    if (nv >= (npy_intp)UINT32_MAX || nt >= (npy_intp)UINT32_MAX) {
+        PyErr_SetString(PyExc_ValueError, "Accel supports fewer than 2**32 - 1 vertices and triangles");
+        return -1;
+    }
+    for (npy_intp k = 0; k < 3 * nv; ++k) {
+        if (!isfinite(vdata[k])) {
+            PyErr_Format(PyExc_ValueError, "vertex %zd has a non-finite coordinate", (Py_ssize_t)(k / 3));
+            return -1;
+        }
+    }
+    for (npy_intp k = 0; k < 3 * nt; ++k) {
+        if ((npy_intp)idata[k] >= nv) {
+            PyErr_Format(PyExc_ValueError, "triangle %zd refers to vertex %u but there are only %zd vertices",
+                         (Py_ssize_t)(k / 3), idata[k], (Py_ssize_t)nv);
+            return -1;
+        }
+    }
+
+    ps_embree_clear_error();
+    RTCScene scene = ps_embree.rtcNewScene(ps_embree_device);
+    if (scene == NULL) {
+        PyErr_Format(PyExc_RuntimeError, "rtcNewScene failed: %s", ps_embree_last_error());
+        return -1;
+    }
+    ps_embree.rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST);
+    ps_embree.rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_HIGH);
+    if (nt > 0) {
+        RTCGeometry geom = ps_embree.rtcNewGeometry(ps_embree_device, RTC_GEOMETRY_TYPE_TRIANGLE);
+        float *vb = geom ? (float *)ps_embree.rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0,
+                                                                      RTC_FORMAT_FLOAT3, 3 * sizeof(float),
+                                                                      (size_t)nv)
+                         : NULL;
+        uint32_t *ib = geom ? (uint32_t *)ps_embree.rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0,
+                                                                            RTC_FORMAT_UINT3, 3 * sizeof(uint32_t),
+                                                                            (size_t)nt)
+                            : NULL;
+        if (!geom || !vb || !ib) {
+            PyErr_Format(PyExc_MemoryError, "Embree could not allocate the mesh buffers: %s", ps_embree_last_error());
+            if (geom)
+                ps_embree.rtcReleaseGeometry(geom);
+            ps_embree.rtcReleaseScene(scene);
+            return -1;
+        }
+        memcpy(vb, vdata, (size_t)nv * 3 * sizeof(float));
+        memcpy(ib, idata, (size_t)nt * 3 * sizeof(uint32_t));
+        ps_embree.rtcCommitGeometry(geom);
+        ps_embree.rtcAttachGeometry(scene, geom);
+        ps_embree.rtcReleaseGeometry(geom);
+    }
+    Py_BEGIN_ALLOW_THREADS
+    ps_embree.rtcCommitScene(scene);
+    Py_END_ALLOW_THREADS
+    if (ps_embree.rtcGetDeviceError(ps_embree_device) != RTC_ERROR_NONE) {
+        PyErr_Format(PyExc_RuntimeError, "building the Embree scene failed: %s", ps_embree_last_error());
+        ps_embree.rtcReleaseScene(scene);
+        return -1;
+    }
+    self->scene = scene;
+    self->n_vertices = nv;
+    self->n_triangles = nt;
+    self->threads = threads > 0 ? threads : ps_default_thread_count();
+    return 0;
+}
+
+static void Accel_dealloc(PsAccel *self)
+{
+    if (self->scene != NULL)
+        ps_embree.rtcReleaseScene(self->scene);
+    Py_TYPE(self)->tp_free((PyObject *)self);
+}
+
+static PyObject *Accel_repr(PsAccel *self)
+{
+    return PyUnicode_FromFormat("Accel(%zd triangles, %zd vertices, threads=%d)", self->n_triangles,
+                                self->n_vertices, self->threads);
+}
+
+static PyObject *Accel_get_threads(PsAccel *self, void *closure)
+{
+    (void)closure;
+    return PyLong_FromLong(self->threads);
+}
+
+static int Accel_set_threads(PsAccel *self, PyObject *value, void *closure)
+{
+    (void)closure;
+    long n = value ? PyLong_AsLong(value) : -1;
+    if (n == -1 && PyErr_Occurred())
+        return -1;
+    if (n < 0 || n > 1024) {
+        PyErr_SetString(PyExc_ValueError, "threads must be between 0 (all cores) and 1024");
+        return -1;
+    }
+    self->threads = n > 0 ? (int)n : ps_default_thread_count();
+    return 0;
+}
+
+static PyObject *Accel_get_triangle_count(PsAccel *self, void *closure)
+{
+    (void)closure;
+    return PyLong_FromSsize_t(self->n_triangles);
+}
+
+static PyObject *Accel_get_vertex_count(PsAccel *self, void *closure)
+{
+    (void)closure;
+    return PyLong_FromSsize_t(self->n_vertices);
+}
+
+static PyMethodDef Accel_methods[] = {
+    {"intersect", (PyCFunction)(void (*)(void))Accel_intersect, METH_VARARGS | METH_KEYWORDS,
+     "intersect(origins, directions, tmin=0.0, tmax=inf, *, threads=0, normals=True)\n--\n\n"
+     "Closest hit of each ray.  origins, directions: (3, N) float32/float64; tmin, tmax: scalars or (N,).\n"
+     "Returns (t, prim, u, v, ng): t float32 (inf on a miss), prim int32 (-1 on a miss), barycentrics u, v\n"
+     "float32 (the hit is (1-u-v)*p0 + u*p1 + v*p2), and the unnormalised geometric normal ng (3, N)\n"
+     "float32 = (p1-p0) x (p2-p0), or None when normals=False."},
+    {"occluded", (PyCFunction)(void (*)(void))Accel_occluded, METH_VARARGS | METH_KEYWORDS,
+     "occluded(origins, directions, tmin=0.0, tmax=inf, *, threads=0)\n--\n\n"
+     "True where some triangle lies on the ray between tmin and tmax.  Returns a bool array (N,)."},
+    {NULL, NULL, 0, NULL},
+};
+
+static PyGetSetDef Accel_getset[] = {
+    {"threads", (getter)Accel_get_threads, (setter)Accel_set_threads, "threads used by queries", NULL},
+    {"triangle_count", (getter)Accel_get_triangle_count, NULL, "number of triangles", NULL},
+    {"vertex_count", (getter)Accel_get_vertex_count, NULL, "number of vertices", NULL},
+    {NULL, NULL, NULL, NULL, NULL},
+};
+
+PyTypeObject PsAccelType = {
+    PyVarObject_HEAD_INIT(NULL, 0).tp_name = "pathspace._native.Accel",
+    .tp_basicsize = sizeof(PsAccel),
+    .tp_flags = Py_TPFLAGS_DEFAULT | Py_TPFLAGS_BASETYPE,
+    .tp_doc = "Accel(vertices, indices, *, threads=0)\n--\n\n"
+              "Embree BVH (robust build) over a triangle mesh.  vertices: (V, 3) float32, C-contiguous;\n"
+              "indices: (F, 3) uint32, C-contiguous.  threads: default number of query threads (0: all cores).",
+    .tp_new = PyType_GenericNew,
+    .tp_init = (initproc)Accel_init,
+    .tp_dealloc = (destructor)Accel_dealloc,
+    .tp_repr = (reprfunc)Accel_repr,
+    .tp_methods = Accel_methods,
+    .tp_getset = Accel_getset,
+};

@@ -1,0 +1,70 @@
+/* pathspace._native: module definition. */
+#include "native.h"
+
+#ifdef __GLIBC__
+#include <malloc.h>
+#endif
+
+#define NPY_NO_DEPRECATED_API NPY_2_0_API_VERSION
+#define PY_ARRAY_UNIQUE_SYMBOL pathspace_native_ARRAY_API
+#include <numpy/arrayobject.h>
+
+static PyObject *default_thread_count(PyObject *module, PyObject *unused)
+{
+    (void)module;
+    (void)unused;
+    return PyLong_FromLong(ps_default_thread_count());
+}
+
+static PyObject *tune_allocator(PyObject *module, PyObject *args)
+{
+    (void)module;
+    long mmap_threshold, trim_threshold;
+    if (!PyArg_ParseTuple(args, "ll:tune_allocator", &mmap_threshold, &trim_threshold))
+        return NULL;
+#ifdef __GLIBC__
+    if (mallopt(M_MMAP_THRESHOLD, (int)mmap_threshold) == 1 && mallopt(M_TRIM_THRESHOLD, (int)trim_threshold) == 1)
+        Py_RETURN_TRUE;
+#endif
+    Py_RETURN_FALSE;
+}
+
+static PyMethodDef module_methods[] = {
+    {"load_embree", ps_load_embree, METH_VARARGS,
+     "load_embree(path, config='')\n--\n\nOpen the Embree 4 shared library at `path` (dlopen, RTLD_LOCAL) and "
+     "create the device used by every Accel.  Loading the same path twice is a no-op."},
+    {"embree_loaded", ps_embree_loaded, METH_NOARGS,
+     "embree_loaded()\n--\n\nPath of the loaded Embree library, or None."},
+    {"tune_allocator", tune_allocator, METH_VARARGS,
+     "tune_allocator(mmap_threshold, trim_threshold)\n--\n\nSet glibc's M_MMAP_THRESHOLD and M_TRIM_THRESHOLD "
+     "(mallopt) so that wavefront-sized arrays reuse heap memory instead of fresh, page-faulting mappings. "
+     "Returns False where this is not glibc."},
+    {"default_thread_count", default_thread_count, METH_NOARGS,
+     "default_thread_count()\n--\n\nNumber of cores this process may run on."},
+    {NULL, NULL, 0, NULL},
+};
+
+static struct PyModuleDef native_module = {
+    PyModuleDef_HEAD_INIT,
+    .m_name = "pathspace._native",
+    .m_doc = "C kernels of pathspace: Embree traversal over NumPy ray arrays.",
+    .m_size = -1,
+    .m_methods = module_methods,
+};
+
+PyMODINIT_FUNC PyInit__native(void)
+{
+    import_array();
+    if (PyType_Ready(&PsAccelType) < 0)
+        return NULL;
+    PyObject *m = PyModule_Create(&native_module);
+    if (m == NULL)
+        return NULL;
+    Py_INCREF(&PsAccelType);
+    if (PyModule_AddObject(m, "Accel", (PyObject *)&PsAccelType) < 0) {
+        Py_DECREF(&PsAccelType);
+        Py_DECREF(m);
+        return NULL;
+    }
+    return m;
+}

@@ -1,0 +1,23 @@
+/* Shared declarations of the pathspace._native extension. */
+#ifndef PATHSPACE_NATIVE_H
+#define PATHSPACE_NATIVE_H
+
+#define PY_SSIZE_T_CLEAN
+#include <Python.h>
+
+#include "embree4_api.h"
+
+/* Embree loader (embree_loader.c). */
+extern EmbreeAPI ps_embree;     /* function table, valid once ps_embree_device != NULL */
+extern RTCDevice ps_embree_device;
+int ps_require_embree(void);    /* 0 if loaded; else sets a Python RuntimeError, returns -1 */
+const char *ps_embree_last_error(void);
+void ps_embree_clear_error(void);
+PyObject *ps_load_embree(PyObject *module, PyObject *args);
+PyObject *ps_embree_loaded(PyObject *module, PyObject *unused);
+
+/* Accel type (accel.c). */
+extern PyTypeObject PsAccelType;
+int ps_default_thread_count(void);
+
+#endif

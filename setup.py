@@ -1,0 +1,16 @@
+"""Build of the C extension pathspace._native (the rest lives in pyproject.toml)."""
+import numpy
+from setuptools import Extension, setup
+
+setup(
+    ext_modules=[
+        Extension(
+            "pathspace._native",
+            sources=["ext/module.c", "ext/embree_loader.c", "ext/accel.c"],
+            depends=["ext/native.h", "ext/embree4_api.h"],
+            include_dirs=["ext", numpy.get_include()],
+            extra_compile_args=["-O3", "-std=c11", "-D_GNU_SOURCE", "-Wall", "-Wextra", "-Wno-missing-field-initializers"],
+            libraries=["dl", "pthread", "m"],
+        )
+    ]
+)

@@ -1,0 +1,85 @@
+"""Ray traversal: the Embree 4 BVH of the C extension, over whole arrays of rays.
+
+The Embree library is the one bundled in the ``embreex`` wheel.  It is found
+through ``importlib.metadata`` and opened by the extension with ``dlopen`` on
+first use; nothing else of embreex is imported.
+"""
+from __future__ import annotations
+
+import importlib.metadata
+from typing import NamedTuple
+
+import numpy as np
+
+from . import _native
+
+__all__ = ["Accel", "Hits", "embree_library_path"]
+
+
+class Hits(NamedTuple):
+    """Closest hits of a batch of N rays (all arrays of length N).
+
+    ``t`` is the distance along the (unnormalised) ray direction, ``inf`` on a
+    miss; ``prim`` the triangle index, -1 on a miss; ``u``, ``v`` the
+    barycentrics of the hit point ``(1-u-v) p0 + u p1 + v p2``; ``ng`` the
+    unnormalised geometric normal ``(p1-p0) x (p2-p0)`` as a (3, N) array, or
+    None when it was not requested.
+    """
+
+    t: np.ndarray
+    prim: np.ndarray
+    u: np.ndarray
+    v: np.ndarray
+    ng: np.ndarray | None
+
+
+def embree_library_path() -> str:
+    """Path of the Embree 4 shared library bundled in the installed embreex wheel."""
+    try:
+        files = importlib.metadata.files("embreex")
+    except importlib.metadata.PackageNotFoundError:
+        raise ImportError(
+            "pathspace traces rays with the Embree 4 library bundled in the 'embreex' wheel, "
+            "which is not installed: pip install embreex"
+        ) from None
+    candidates = [f for f in files or () if f.name.startswith("libembree4") and ".so" in f.name]
+    if not candidates:
+        raise ImportError(
+            "the installed embreex wheel contains no libembree4 shared library "
+            f"(looked through {len(files or ())} files); reinstall it: pip install --force-reinstall embreex"
+        )
+    return str(candidates[0].locate())
+
+
+def _ensure_embree() -> None:
+    if _native.embree_loaded() is None:
+        _native.load_embree(embree_library_path())
+
+
+class Accel(_native.Accel):
+    """Embree BVH over a triangle mesh (robust build), queried with arrays of rays.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float32, C-contiguous
+    indices : (F, 3) uint32, C-contiguous
+    threads : default number of query threads; 0 means every core this process may use.
+
+    Rays are given as (3, N) arrays of origins and directions (float32 or
+    float64, any strides) and per-ray ``tmin``/``tmax`` (scalars or (N,)
+    arrays).  Queries release the GIL and run on ``threads`` threads in
+    16-wide packets.
+    """
+
+    def __init__(self, vertices: np.ndarray, indices: np.ndarray, *, threads: int = 0) -> None:
+        _ensure_embree()
+        super().__init__(vertices, indices, threads=threads)
+
+    def intersect(self, origins, directions, tmin=0.0, tmax=np.inf, *, threads: int = 0,
+                  normals: bool = True) -> Hits:
+        """Closest hit of every ray; see :class:`Hits`."""
+        return Hits(*super().intersect(origins, directions, tmin, tmax, threads=threads, normals=normals))
+
+    def occluded(self, origins, directions, tmin=0.0, tmax=np.inf, *, threads: int = 0) -> np.ndarray:
+        """Boolean (N,) array: True where a triangle lies on the ray within [tmin, tmax]."""
+        return super().occluded(origins, directions, tmin, tmax, threads=threads)

@@ -1,0 +1,199 @@
+"""The render driver: cut a render into work items, run them on threads, fill a film.
+
+A render of ``spp`` samples per pixel is ``spp`` passes over the image.  Work
+items hold about ``TILE_PIXELS`` paths: a tile of a large image, or several
+passes of a small one (:func:`work_layout`); each (pass, tile) unit has its
+own random stream (see :mod:`pathspace.sampler`).  Items run on a pool of
+worker threads -- NumPy and Embree release the GIL in their inner loops --
+and their results are added to the film in item order, so the same seed
+gives the bit-identical image whatever the thread count.
+"""
+from __future__ import annotations
+
+import os
+import time as _time
+from collections import deque
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import Any, Iterator
+
+import numpy as np
+
+from . import _native
+from .film import Film
+from .integrators import WorkItem, make_integrator, work_layout
+from .sampler import StreamSampler
+from .scene import Scene, load_scene
+
+__all__ = ["render", "RenderResult"]
+
+# Wavefront arrays are a few MB each and are allocated and freed many times a
+# bounce.  By default glibc serves such blocks with fresh mmap()s or trims the
+# heap after they are freed, so every allocation page-faults its memory back
+# in; raising the two thresholds keeps them on the heap (measured: the Cornell
+# box path tracer runs ~15% faster).  Set PATHSPACE_MALLOC_TUNING=0 to opt out.
+MMAP_THRESHOLD = 32 << 20
+TRIM_THRESHOLD = 256 << 20
+_allocator_tuned = False
+
+
+def _tune_allocator() -> None:
+    global _allocator_tuned
+    if not _allocator_tuned and os.environ.get("PATHSPACE_MALLOC_TUNING", "1") != "0":
+        _native.tune_allocator(MMAP_THRESHOLD, TRIM_THRESHOLD)
+    _allocator_tuned = True
+
+
+@dataclass
+class RenderResult:
+    """A finished render.
+
+    Attributes
+    ----------
+    image : (height, width, 3) float64, the per-pixel mean (linear RGB radiance)
+    variance : (height, width, 3) float64, estimated variance of that mean
+    stats : estimator, parameters, spp, seconds, samples per second, rays, non-finite samples, ...
+    film : the film with the raw sums (for merging or further passes)
+    """
+
+    image: np.ndarray
+    variance: np.ndarray
+    stats: dict[str, Any]
+    film: Film = field(repr=False)
+
+    def summary(self) -> str:
+        """One line: estimator, spp, time and throughput."""
+        s = self.stats
+        text = (f"{s['estimator']}: {s['spp']} spp at {s['width']}x{s['height']} in {s['seconds']:.2f} s "
+                f"({s['samples_per_second'] / 1e6:.3f} M samples/s, {s['rays_per_second'] / 1e6:.2f} M rays/s, "
+                f"{s['threads']} threads)")
+        if s["nonfinite"]:
+            text += f"; {s['nonfinite']} non-finite samples were dropped"
+        return text
+
+
+def _work_items(pixel_count: int, passes: Iterator[int], tile: int, per_item: int) -> Iterator[WorkItem]:
+    """Work items over the given passes, in order; see :func:`work_layout`."""
+    group: list[int] = []
+    for p in passes:
+        group.append(p)
+        if len(group) == per_item:
+            yield from _tiles(group, tile, pixel_count)
+            group = []
+    if group:
+        yield from _tiles(group, tile, pixel_count)
+
+
+def _tiles(group: list[int], tile: int, pixel_count: int) -> Iterator[WorkItem]:
+    for k, start in enumerate(range(0, pixel_count, tile)):
+        yield WorkItem(range(group[0], group[-1] + 1), k, start, min(start + tile, pixel_count))
+
+
+def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int | None = None,
+           time: float | None = None, seed: int = 0, threads: int | None = None, progress: bool = False,
+           **params: Any) -> RenderResult:
+    """Render ``scene`` with the named estimator.
+
+    Parameters
+    ----------
+    scene : a Scene or the path of a scene file
+    estimator : estimator name ("pt"); ``params`` are its parameters
+    spp : samples (passes) per pixel; default 16 unless ``time`` is given
+    time : a time budget in seconds instead of a sample count: passes are
+        started until it is spent (at least one pass runs)
+    seed : the seed of every random stream; the same seed gives the same image
+    threads : worker threads (default: every core this process may use)
+    progress : show a tqdm progress bar
+    """
+    if not isinstance(scene, Scene):
+        scene = load_scene(scene)
+    if spp is not None and time is not None:
+        raise ValueError("give either spp or time, not both")
+    if spp is None and time is None:
+        spp = 16
+    if spp is not None and not (isinstance(spp, (int, np.integer)) and spp >= 1):
+        raise ValueError(f"spp: expected an integer >= 1, got {spp!r}")
+    if time is not None and not (np.isfinite(time) and time > 0):
+        raise ValueError(f"time: expected a number of seconds > 0, got {time!r}")
+    if not (isinstance(seed, (int, np.integer)) and seed >= 0):
+        raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
+    threads = _native.default_thread_count() if threads is None else threads
+    if not (isinstance(threads, (int, np.integer)) and threads >= 1):
+        raise ValueError(f"threads: expected an integer >= 1, got {threads!r}")
+
+    integrator = make_integrator(estimator, **params)
+    _tune_allocator()
+    camera = scene.camera
+    film = Film(camera.width, camera.height)
+    scene.accel  # build the BVH before the clock starts
+    start = _time.perf_counter()
+    deadline = None if time is None else start + time
+
+    def passes() -> Iterator[int]:
+        p = 0
+        while (spp is not None and p < spp) or (deadline is not None and (p == 0 or _time.perf_counter() < deadline)):
+            yield p
+            p += 1
+
+    def run(item: WorkItem):
+        sampler = StreamSampler(seed, item.keys, item.counts)
+        return item, integrator.render_item(scene, item, sampler, threads=1 if threads > 1 else 0)
+
+    bar = _progress_bar(progress, spp, estimator)
+    tile, per_item = work_layout(camera.pixel_count, spp, threads)
+    last_tile = -(-camera.pixel_count // tile) - 1
+    rays = done_passes = 0
+
+    def collect(future) -> None:
+        nonlocal rays, done_passes
+        item, result = future.result()
+        width = item.pixel_stop - item.pixel_start
+        for k in range(len(item.passes)):
+            film.add_tile(item.pixel_start, result.values[:, k * width:(k + 1) * width])
+        rays += result.rays
+        if item.tile == last_tile:
+            done_passes += len(item.passes)
+            if bar is not None:
+                bar.update(len(item.passes))
+
+    # Results are collected in submission order and added pass by pass, so the
+    # film sums in the same order whatever the thread count or the grouping of
+    # passes into items; at most 2 * threads items are in flight.
+    with ThreadPoolExecutor(max_workers=threads) as pool:
+        pending: deque = deque()
+        for item in _work_items(camera.pixel_count, passes(), tile, per_item):
+            pending.append(pool.submit(run, item))
+            while len(pending) > 2 * threads:
+                collect(pending.popleft())
+        while pending:
+            collect(pending.popleft())
+    if bar is not None:
+        bar.close()
+    seconds = _time.perf_counter() - start
+    samples = int(film.count.sum())
+    stats = {
+        "estimator": estimator,
+        "params": {k: v for k, v in vars(integrator).items() if not k.startswith("_") and k != "roulette"},
+        "plan": integrator.plan(scene),
+        "spp": done_passes,
+        "seed": int(seed),
+        "threads": int(threads),
+        "width": camera.width,
+        "height": camera.height,
+        "seconds": seconds,
+        "samples": samples,
+        "samples_per_second": samples / seconds,
+        "rays": rays,
+        "rays_per_second": rays / seconds,
+        "nonfinite": film.nonfinite,
+        "scene": scene.source,
+    }
+    return RenderResult(image=film.mean(), variance=film.variance(), stats=stats, film=film)
+
+
+def _progress_bar(enabled: bool, total: int | None, estimator: str):
+    if not enabled:
+        return None
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, unit="spp", desc=f"rendering ({estimator})", dynamic_ncols=True)

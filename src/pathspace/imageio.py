@@ -1,0 +1,101 @@
+"""Reading and writing images: OpenEXR for data, PNG for looking at.
+
+EXR files are float32 (OpenEXR does not store float64): the image as the
+``RGB`` layer, its per-pixel variance (of the mean) as the ``variance`` layer
+(channels ``variance.R/G/B``), and render metadata as string attributes of
+the header, prefixed ``pathspace.``.  PNGs are 8-bit sRGB after an exposure
+scale, with the sRGB transfer function from colour-science.
+"""
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+__all__ = ["write_exr", "read_exr", "write_png", "to_srgb8"]
+
+METADATA_PREFIX = "pathspace."
+
+
+def _check_image(image: np.ndarray, name: str) -> np.ndarray:
+    image = np.asarray(image)
+    if image.ndim != 3 or image.shape[2] != 3:
+        raise ValueError(f"{name} must have shape (height, width, 3), got {image.shape}")
+    return image
+
+
+def write_exr(path: str | os.PathLike, image: np.ndarray, variance: np.ndarray | None = None,
+              metadata: dict[str, Any] | None = None) -> None:
+    """Write an (H, W, 3) image, optionally its variance, and metadata to an OpenEXR file (float32, ZIP)."""
+    import OpenEXR
+
+    image = _check_image(image, "image")
+    channels = {"RGB": np.ascontiguousarray(image, dtype=np.float32)}
+    if variance is not None:
+        variance = _check_image(variance, "variance")
+        if variance.shape != image.shape:
+            raise ValueError(f"variance shape {variance.shape} differs from image shape {image.shape}")
+        # Pixels with fewer than two samples have no variance estimate (inf); store them as inf too.
+        for c, name in enumerate("RGB"):
+            channels[f"variance.{name}"] = np.ascontiguousarray(variance[:, :, c], dtype=np.float32)
+    header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    for key, value in (metadata or {}).items():
+        header[METADATA_PREFIX + key] = value if isinstance(value, str) else json.dumps(value, default=str)
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    with OpenEXR.File(header, channels) as exr:
+        exr.write(str(path))
+
+
+def read_exr(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray | None, dict[str, Any]]:
+    """Read (image (H, W, 3) float32, variance or None, metadata) from an EXR written by :func:`write_exr`.
+
+    Files from other programs work too if they hold R, G and B channels.
+    """
+    import OpenEXR
+
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such EXR file")
+    try:
+        with OpenEXR.File(str(path)) as exr:
+            channels = {name: np.array(ch.pixels) for name, ch in exr.channels().items()}
+            header = dict(exr.header())
+    except Exception as error:  # OpenEXR raises RuntimeError/OSError variants for bad files
+        raise ValueError(f"{path}: cannot read as OpenEXR: {error}") from None
+    if "RGB" in channels:
+        image = channels["RGB"]
+    elif all(c in channels for c in "RGB"):
+        image = np.stack([channels[c] for c in "RGB"], axis=-1)
+    else:
+        raise ValueError(f"{path}: no RGB channels (found {', '.join(sorted(channels))})")
+    variance = channels.get("variance")
+    metadata = {}
+    for key, value in header.items():
+        if key.startswith(METADATA_PREFIX):
+            name = key[len(METADATA_PREFIX):]
+            try:
+                metadata[name] = json.loads(value)
+            except (TypeError, ValueError):
+                metadata[name] = value
+    return image.astype(np.float32), (variance.astype(np.float32) if variance is not None else None), metadata
+
+
+def to_srgb8(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
+    """Linear RGB (H, W, 3) -> 8-bit sRGB: scale by 2**exposure, clip to [0, 1], sRGB OETF (IEC 61966-2-1)."""
+    from ._colour import colour
+
+    scaled = np.clip(np.nan_to_num(np.asarray(image, dtype=np.float64) * 2.0 ** exposure, nan=0.0), 0.0, 1.0)
+    encoded = colour.cctf_encoding(scaled, function="sRGB")
+    return np.round(encoded * 255.0).astype(np.uint8)
+
+
+def write_png(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.0) -> None:
+    """Write linear RGB (H, W, 3) as an 8-bit sRGB PNG (see :func:`to_srgb8`)."""
+    from PIL import Image
+
+    image = _check_image(image, "image")
+    Path(path).parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(to_srgb8(image, exposure), mode="RGB").save(str(path))

@@ -1,0 +1,159 @@
+"""Typed, validated reads of one table of a scene description.
+
+Each read names the field by its full path, so that every error says which
+file, which field and what was expected, e.g.::
+
+    scene.toml: shapes[3].emitter.radiance: expected 3 finite numbers >= 0, got [1, -2, 0]
+
+Unknown keys are errors too (a misspelt field must not be silently ignored).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Iterable
+
+import numpy as np
+
+from .errors import SceneError
+
+_MISSING = object()
+
+
+def _show(value: Any) -> str:
+    text = repr(value)
+    return text if len(text) <= 80 else text[:77] + "..."
+
+
+class Fields:
+    """Reader over one table (a dict) at a given path of a scene file."""
+
+    def __init__(self, table: Any, path: str, source: str) -> None:
+        self.source = source
+        self.path = path
+        if not isinstance(table, dict):
+            raise self.error(f"expected a table, got {_show(table)}", field=None)
+        self.table = table
+        self.used: set[str] = set()
+
+    def name(self, field: str | None) -> str:
+        """Full path of a field of this table."""
+        if field is None:
+            return self.path or "(top level)"
+        return f"{self.path}.{field}" if self.path else field
+
+    def error(self, message: str, field: str | None) -> SceneError:
+        """A SceneError naming the file and the field."""
+        return SceneError(f"{self.source}: {self.name(field)}: {message}")
+
+    def has(self, field: str) -> bool:
+        """Whether the field is present."""
+        return field in self.table
+
+    def _get(self, field: str, default: Any) -> Any:
+        self.used.add(field)
+        if field in self.table:
+            return self.table[field]
+        if default is _MISSING:
+            raise self.error("required field is missing", field)
+        return default
+
+    def raw(self, field: str, default: Any = _MISSING) -> Any:
+        """The value of a field without type checks (marks it as known)."""
+        return self._get(field, default)
+
+    def sub(self, field: str, default: Any = _MISSING) -> "Fields | None":
+        """The sub-table ``field`` as a Fields reader (None if absent and a default was given)."""
+        value = self._get(field, default)
+        if value is None:
+            return None
+        return Fields(value, self.name(field), self.source)
+
+    def string(self, field: str, default: Any = _MISSING, choices: Iterable[str] | None = None) -> str:
+        """A string, optionally one of ``choices``."""
+        value = self._get(field, default)
+        if not isinstance(value, str):
+            raise self.error(f"expected a string, got {_show(value)}", field)
+        if choices is not None:
+            options = list(choices)
+            if value not in options:
+                raise self.error(f"expected one of {', '.join(map(repr, options))}, got {value!r}", field)
+        return value
+
+    def boolean(self, field: str, default: Any = _MISSING) -> bool:
+        """true or false."""
+        value = self._get(field, default)
+        if not isinstance(value, bool):
+            raise self.error(f"expected true or false, got {_show(value)}", field)
+        return value
+
+    def number(self, field: str, default: Any = _MISSING, *, low: float | None = None, high: float | None = None,
+               low_open: bool = False, high_open: bool = False) -> float:
+        """A finite number within [low, high] (bounds optional, either side may be open)."""
+        value = self._get(field, default)
+        self._check_number(value, field, low, high, low_open, high_open, what="a number")
+        return float(value)
+
+    def integer(self, field: str, default: Any = _MISSING, *, low: int | None = None) -> int:
+        """An integer >= low."""
+        value = self._get(field, default)
+        if isinstance(value, bool) or not isinstance(value, int) or (low is not None and value < low):
+            bound = f" >= {low}" if low is not None else ""
+            raise self.error(f"expected an integer{bound}, got {_show(value)}", field)
+        return value
+
+    def vector(self, field: str, length: int, default: Any = _MISSING, *, low: float | None = None,
+               integer: bool = False) -> np.ndarray:
+        """A list of ``length`` finite numbers (each >= low if given), as float64 (or int64 if integer)."""
+        value = self._get(field, default)
+        kind = "integers" if integer else "finite numbers"
+        bound = f" >= {low:g}" if low is not None else ""
+        expected = f"expected {length} {kind}{bound}, got {_show(value)}"
+        if not isinstance(value, (list, tuple)) or len(value) != length:
+            raise self.error(expected, field)
+        for item in value:
+            if isinstance(item, bool) or not isinstance(item, (int, float)):
+                raise self.error(expected, field)
+            if integer and not isinstance(item, int):
+                raise self.error(expected, field)
+            if not math.isfinite(item) or (low is not None and item < low):
+                raise self.error(expected, field)
+        return np.array(value, dtype=np.int64 if integer else np.float64)
+
+    def array(self, field: str, columns: int, *, integer: bool = False) -> np.ndarray:
+        """A non-empty list of rows of ``columns`` numbers, as an (M, columns) array."""
+        value = self._get(field, _MISSING)
+        kind = "integers" if integer else "finite numbers"
+        expected = f"expected a non-empty list of rows of {columns} {kind}"
+        if not isinstance(value, list) or not value:
+            raise self.error(f"{expected}, got {_show(value)}", field)
+        for i, row in enumerate(value):
+            ok = isinstance(row, (list, tuple)) and len(row) == columns and all(
+                not isinstance(x, bool) and isinstance(x, int if integer else (int, float)) for x in row)
+            if ok and not integer:
+                ok = all(math.isfinite(x) for x in row)
+            if not ok:
+                raise self.error(f"{expected}; row {i} is {_show(row)}", field)
+        return np.array(value, dtype=np.int64 if integer else np.float64)
+
+    def finish(self) -> None:
+        """Raise for any key of the table that no read asked for (a misspelt or unsupported field)."""
+        unknown = sorted(set(self.table) - self.used)
+        if unknown:
+            known = ", ".join(sorted(self.used)) or "none"
+            raise self.error(f"unknown field(s) {', '.join(map(repr, unknown))} (known fields: {known})",
+                             field=None)
+
+    def _check_number(self, value, field, low, high, low_open, high_open, what):
+        ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+        if ok and low is not None:
+            ok = value > low if low_open else value >= low
+        if ok and high is not None:
+            ok = value < high if high_open else value <= high
+        if not ok:
+            parts = []
+            if low is not None:
+                parts.append(f"{'>' if low_open else '>='} {low:g}")
+            if high is not None:
+                parts.append(f"{'<' if high_open else '<='} {high:g}")
+            bound = (" " + " and ".join(parts)) if parts else ""
+            raise self.error(f"expected {what}{bound}, got {_show(value)}", field)

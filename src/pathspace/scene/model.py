@@ -1,0 +1,66 @@
+"""The scene model, independent of any file format."""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+
+from ..accel import Accel
+from ..camera import PinholeCamera
+from ..lights import AreaLights
+from ..materials import MaterialTable
+from .mesh import TriangleMesh
+
+__all__ = ["Scene", "RAY_OFFSET_RELATIVE"]
+
+# Rays leaving a surface start this far off it, relative to the largest
+# coordinate magnitude of the scene.  Float32 hit points are accurate to a few
+# units in the last place of that magnitude (~1e-7 relative); 2**-16 leaves a
+# wide margin while staying invisible.  Being relative, it keeps renders
+# invariant under scaling the scene.
+RAY_OFFSET_RELATIVE = 2.0 ** -16
+
+
+@dataclass
+class Scene:
+    """Everything an estimator needs: geometry, materials, emitters and camera.
+
+    Attributes
+    ----------
+    camera : the camera
+    mesh : all triangles, with material and shape ids
+    materials : material table
+    lights : emitting triangles and their sampling pmf
+    shape_names : name of each shape (index = ``mesh.shape``)
+    source : the file it was loaded from, if any
+    """
+
+    camera: PinholeCamera
+    mesh: TriangleMesh
+    materials: MaterialTable
+    lights: AreaLights
+    shape_names: list[str]
+    source: str | None = None
+
+    @cached_property
+    def ray_offset(self) -> float:
+        """Distance by which rays are started off surfaces (see RAY_OFFSET_RELATIVE)."""
+        return float(RAY_OFFSET_RELATIVE * max(np.abs(self.mesh.vertices).max(), np.finfo(np.float32).tiny))
+
+    @cached_property
+    def accel(self) -> Accel:
+        """The Embree BVH of the mesh, built on first use (queries choose their thread count)."""
+        return Accel(self.mesh.vertices.astype(np.float32), self.mesh.indices)
+
+    def describe(self) -> str:
+        """A short human-readable summary."""
+        lo, hi = self.mesh.bounds()
+        return "\n".join([
+            f"scene {self.source or '(in memory)'}",
+            f"  {self.mesh.triangle_count} triangles in {len(self.shape_names)} shapes, "
+            f"bounds {np.round(lo, 4).tolist()} .. {np.round(hi, 4).tolist()}",
+            f"  {len(self.materials)} materials: {', '.join(self.materials.names)}",
+            f"  {self.lights!r}",
+            f"  {self.camera!r}",
+        ])

@@ -1,0 +1,42 @@
+"""Warps from the unit square to sampling domains, each with its density.
+
+Every ``square_to_X`` has a matching ``square_to_X_pdf`` giving the density of
+its output in the measure named in its docstring.  Inputs are uniform numbers
+in [0, 1) as (2, N) arrays; outputs are (3, N) float32 unit directions, or
+barycentrics.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = [
+    "square_to_uniform_sphere",
+    "square_to_uniform_sphere_pdf",
+    "square_to_uniform_triangle",
+]
+
+INV_PI = 1.0 / np.pi
+INV_FOUR_PI = 0.25 / np.pi
+
+
+def square_to_uniform_sphere(u: np.ndarray) -> np.ndarray:
+    """Directions with the uniform density 1/(4 pi) over the unit sphere (Archimedes: z uniform in [-1, 1])."""
+    z = np.float32(1) - np.float32(2) * u[0].astype(np.float32)
+    r = np.sqrt(np.maximum(np.float32(0), np.float32(1) - z * z))
+    phi = np.float32(2 * np.pi) * u[1].astype(np.float32)
+    return np.stack((r * np.cos(phi), r * np.sin(phi), z))
+
+
+def square_to_uniform_sphere_pdf(v: np.ndarray) -> np.ndarray:
+    """Solid-angle density of :func:`square_to_uniform_sphere`."""
+    return np.full(v.shape[1], INV_FOUR_PI)
+
+
+def square_to_uniform_triangle(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Barycentrics (b1, b2) uniform over a triangle: p = (1-b1-b2) p0 + b1 p1 + b2 p2.
+
+    Square-root parametrisation (Shirley & Chiu / pbrt-v3 UniformSampleTriangle);
+    the area density is 1/area of the triangle.
+    """
+    su = np.sqrt(u[0])
+    return su * (1.0 - u[1]), su * u[1]
