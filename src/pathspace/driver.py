@@ -91,7 +91,7 @@ def _tiles(group: list[int], tile: int, pixel_count: int) -> Iterator[WorkItem]:
 
 def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int | None = None,
            time: float | None = None, seed: int = 0, threads: int | None = None, progress: bool = False,
-           **params: Any) -> RenderResult:
+           first_pass: int = 0, **params: Any) -> RenderResult:
     """Render ``scene`` with the named estimator.
 
     Parameters
@@ -104,6 +104,9 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
     seed : the seed of every random stream; the same seed gives the same image
     threads : worker threads (default: every core this process may use)
     progress : show a tqdm progress bar
+    first_pass : index of the first pass; renders of disjoint pass ranges with
+        the same seed are independent and their films add up (:meth:`Film.merge`)
+        to the render of the union
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
@@ -117,6 +120,8 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
         raise ValueError(f"time: expected a number of seconds > 0, got {time!r}")
     if not (isinstance(seed, (int, np.integer)) and seed >= 0):
         raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
+    if not (isinstance(first_pass, (int, np.integer)) and first_pass >= 0):
+        raise ValueError(f"first_pass: expected an integer >= 0, got {first_pass!r}")
     threads = _native.default_thread_count() if threads is None else threads
     if not (isinstance(threads, (int, np.integer)) and threads >= 1):
         raise ValueError(f"threads: expected an integer >= 1, got {threads!r}")
@@ -132,7 +137,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
     def passes() -> Iterator[int]:
         p = 0
         while (spp is not None and p < spp) or (deadline is not None and (p == 0 or _time.perf_counter() < deadline)):
-            yield p
+            yield first_pass + p
             p += 1
 
     def run(item: WorkItem):
@@ -177,6 +182,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
         "plan": integrator.plan(scene),
         "spp": done_passes,
         "seed": int(seed),
+        "first_pass": int(first_pass),
         "threads": int(threads),
         "width": camera.width,
         "height": camera.height,

@@ -133,10 +133,11 @@ def _materials(fields: Fields) -> tuple[list[str], list[Diffuse]]:
         table = fields.sub(name)
         kind = table.string("type", choices=MATERIAL_TYPES)
         if kind == "diffuse":
-            materials.append(Diffuse(tuple(table.vector("reflectance", 3, low=0.0))))
-            if np.any(np.array(materials[-1].reflectance) > 1.0):
+            reflectance = table.vector("reflectance", 3, low=0.0)
+            if np.any(reflectance > 1.0):
                 raise table.error(f"expected 3 numbers in [0, 1] (an albedo above 1 creates energy), "
-                                  f"got {list(materials[-1].reflectance)}", "reflectance")
+                                  f"got {reflectance.tolist()}", "reflectance")
+            materials.append(Diffuse(tuple(float(x) for x in reflectance)))
         table.finish()
         names.append(name)
     if not names:

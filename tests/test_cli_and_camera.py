@@ -1,0 +1,84 @@
+"""The command line, and the camera's conventions."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+
+import pathspace as ps
+from pathspace.camera import PinholeCamera
+from pathspace.imageio import read_exr
+
+from conftest import ROOT
+
+
+def run_cli(*args, cwd=None):
+    return subprocess.run([sys.executable, "-m", "pathspace.cli", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd)
+
+
+def test_render_and_compare(tmp_path):
+    scene = tmp_path / "scene.toml"
+    text = (ROOT / "scenes" / "cornell-box" / "scene.toml").read_text()
+    scene.write_text(text.replace("resolution = [256, 256]", "resolution = [32, 32]"))
+
+    out = tmp_path / "out" / "a.exr"
+    done = run_cli("render", scene, "--spp", 4, "--seed", 3, "-o", out, "-q", "-p", "max_depth=3")
+    assert done.returncode == 0, done.stderr
+    assert "pt: 4 spp at 32x32" in done.stdout and "M samples/s" in done.stdout
+    assert out.exists() and out.with_suffix(".png").exists()
+    image, variance, meta = read_exr(out)
+    assert image.shape == (32, 32, 3) and variance.shape == (32, 32, 3)
+    assert meta["spp"] == 4 and meta["params"]["max_depth"] == 3
+    direct = ps.render(ps.load_scene(scene), spp=4, seed=3, max_depth=3)
+    np.testing.assert_array_equal(image, direct.image.astype(np.float32))
+
+    done = run_cli("render", scene, "--spp", 4, "--seed", 4, "-o", tmp_path / "b.exr", "-q", "--no-png")
+    assert done.returncode == 0 and not (tmp_path / "b.png").exists()
+    compared = run_cli("compare", tmp_path / "b.exr", out, "--json")
+    values = json.loads(compared.stdout)
+    assert set(values) == {"mse", "rmse", "relmse"} and values["mse"] > 0
+    same = json.loads(run_cli("compare", out, out, "--json").stdout)
+    assert same == {"mse": 0.0, "rmse": 0.0, "relmse": 0.0}
+
+
+def test_cli_errors_are_one_line(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[camera]\nposition = [0, 0]\n')
+    done = run_cli("render", bad, "-o", tmp_path / "x.exr")
+    assert done.returncode == 2
+    assert done.stderr.strip().startswith("pathspace render: error:") and "camera.position" in done.stderr
+    assert "Traceback" not in done.stderr
+    done = run_cli("render", ROOT / "scenes" / "furnace" / "scene.toml", "-p", "bogus=1", "-o", tmp_path / "y.exr")
+    assert done.returncode == 2 and "has no parameter(s) bogus" in done.stderr
+
+
+def test_info_prints_the_plan():
+    done = run_cli("info", ROOT / "scenes" / "cornell-box" / "scene.toml")
+    assert done.returncode == 0
+    assert "36 triangles" in done.stdout and "plan: next-event estimation + BSDF sampling" in done.stdout
+
+
+def test_camera_orientation_and_fov():
+    cam = PinholeCamera([0, 0, 3.9], [0, 0, 0], [0, 1, 0], 40.0, 200, 100, fov_axis="x")
+    centre = np.array([50 * 200 + 100])  # pixel (x=100, y=50): its top-left corner is the image centre
+    _, d = cam.generate_rays(centre, np.zeros((2, 1)))
+    np.testing.assert_allclose(d[:, 0], [0, 0, -1], atol=1e-7)
+    # Left edge of the image looks toward -x at half the horizontal fov; top edge toward +y.
+    _, left = cam.generate_rays(np.array([50 * 200]), np.array([[0.0], [0.0]]))
+    np.testing.assert_allclose(np.degrees(np.arctan2(-left[0, 0], -left[2, 0])), 20.0, rtol=1e-5)
+    _, top = cam.generate_rays(np.array([100]), np.zeros((2, 1)))
+    assert top[1, 0] > 0
+    # fov_axis = "y" puts the angle on the vertical axis; "smaller" picks y for a wide image.
+    tall = PinholeCamera([0, 0, 3.9], [0, 0, 0], [0, 1, 0], 40.0, 200, 100, fov_axis="smaller")
+    _, up = tall.generate_rays(np.array([100]), np.zeros((2, 1)))
+    np.testing.assert_allclose(np.degrees(np.arctan2(up[1, 0], -up[2, 0])), 20.0, rtol=1e-5)
+
+
+def test_cornell_box_image_orientation(cornell_small):
+    """The red wall (world -x) appears on the left of the image, the green one on the right."""
+    image = ps.render(cornell_small, spp=4, seed=1, max_depth=2).image
+    left, right = image[32, 2], image[32, -3]
+    assert left[0] > 2 * left[1] and right[1] > 2 * right[0]

@@ -1,0 +1,160 @@
+"""The TOML scene loader: built-in shapes, mesh files, and errors that name file, field and expectation."""
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+import trimesh
+
+import pathspace as ps
+from pathspace import SceneError
+
+BASE = {
+    "camera": {"position": [0, 0, 5], "look_at": [0, 0, 0], "fov": 40, "resolution": [16, 12]},
+    "materials": {"grey": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
+    "shapes": [
+        {"name": "floor", "type": "quad", "corner": [-1, -1, 0], "edge_u": [2, 0, 0], "edge_v": [0, 2, 0],
+         "material": "grey"},
+        {"name": "lamp", "type": "quad", "corner": [-0.2, -0.2, 1], "edge_u": [0, 0.4, 0], "edge_v": [0.4, 0, 0],
+         "material": "grey", "emitter": {"radiance": [5, 5, 5]}},
+    ],
+}
+
+
+def scene_with(**changes):
+    data = copy.deepcopy(BASE)
+    for path, value in changes.items():
+        target = data
+        keys = path.split("__")
+        for key in keys[:-1]:
+            target = target[int(key)] if isinstance(target, list) else target[key]
+        last = keys[-1]
+        if value is DELETE:
+            del target[last]
+        elif isinstance(target, list):
+            target[int(last)] = value
+        else:
+            target[last] = value
+    return data
+
+
+DELETE = object()
+
+
+def load(data, source="test.toml"):
+    return ps.scene_from_dict(data, source=source)
+
+
+def test_base_scene_loads():
+    scene = load(BASE)
+    assert scene.mesh.triangle_count == 4
+    assert scene.lights.count == 2
+    np.testing.assert_allclose(scene.lights.area.sum(), 0.16)
+    # The lamp's normal is edge_u x edge_v = (0, 0.4, 0) x (0.4, 0, 0) = -z: it shines down.
+    np.testing.assert_allclose(scene.mesh.normal[:, scene.lights.triangles].T, [[0, 0, -1]] * 2, atol=1e-7)
+    assert scene.camera.resolution == (16, 12)
+
+
+@pytest.mark.parametrize("changes, message", [
+    ({"shapes__0__material": "gold"}, r"test.toml: shapes\[0\] \('floor'\).material: unknown material 'gold' "
+                                      r"\(defined: grey\)"),
+    ({"shapes__1__emitter": {"radiance": [1, 2]}}, r"shapes\[1\] \('lamp'\).emitter.radiance: expected 3 finite "
+                                                   r"numbers >= 0, got \[1, 2\]"),
+    ({"shapes__1__emitter": {"radiance": [1, -2, 0]}}, r"emitter.radiance: expected 3 finite numbers >= 0"),
+    ({"shapes__1__emitter": {"radiance": [float("nan"), 1, 1]}}, r"emitter.radiance: expected 3 finite numbers"),
+    ({"shapes__1__emitter": {"radiance": [0, 0, 0]}}, r"emitter.radiance: expected at least one positive"),
+    ({"shapes__1__emitter": {"radiance": [1, 1, 1], "twosided": True}}, r"emitter: unknown field\(s\) 'twosided'"),
+    ({"camera__position": [0, 0]}, r"camera.position: expected 3 finite numbers, got \[0, 0\]"),
+    ({"camera__look_at": [0, 0, 5]}, r"camera.look_at: must differ from position"),
+    ({"camera__up": [0, 0, 2]}, r"camera.up: must not be zero or parallel to the viewing direction"),
+    ({"camera__fov": 180}, r"camera.fov: expected a number > 0 and < 180, got 180"),
+    ({"camera__fov": float("nan")}, r"camera.fov: expected a number > 0 and < 180, got nan"),
+    ({"camera__resolution": [0, 10]}, r"camera.resolution: expected 2 integers >= 1"),
+    ({"camera__fov_axis": "diagonal"}, r"camera.fov_axis: expected one of 'x', 'y', 'smaller', 'larger'"),
+    ({"camera__focal": 1}, r"camera: unknown field\(s\) 'focal'"),
+    ({"camera": DELETE}, r"test.toml: camera: required field is missing"),
+    ({"materials__grey__reflectance": [0.5, 1.5, 0.5]}, r"materials.grey.reflectance: expected 3 numbers in \[0, 1\]"),
+    ({"materials__grey__type": "plastic"}, r"materials.grey.type: expected one of 'diffuse', got 'plastic'"),
+    ({"shapes": []}, r"shapes: expected a non-empty array of tables"),
+    ({"shapes__0__type": "cone"}, r"shapes\[0\] \('floor'\).type: expected one of 'triangles', 'mesh', 'quad'"),
+    ({"shapes__0__edge_v": [4, 0, 0]}, r"shapes\[0\] \('floor'\): 2 degenerate \(zero-area\) triangle\(s\)"),
+    ({"shapes__1__edge_v": [0, 0.8, 0], "shapes__1__drop_degenerate": True},
+     r"shapes\[1\] \('lamp'\): every triangle is degenerate \(zero area\)"),
+    ({"shapes__0__size": [1, 1, 1]}, r"shapes\[0\] \('floor'\): unknown field\(s\) 'size'"),
+    ({"shapes__0__transform": {"scale": 0}}, r"transform.scale: expected non-zero scale factors"),
+    ({"shapes__0__transform": {"rotate": {"axis": [0, 0, 0], "angle": 10}}}, r"rotate.axis: expected a non-zero"),
+    ({"format": 2}, r"test.toml: format: this pathspace reads scene format 1, got 2"),
+])
+def test_errors_name_file_field_and_expectation(changes, message):
+    with pytest.raises(SceneError, match=message):
+        load(scene_with(**changes))
+
+
+def test_zero_area_emitter_is_rejected():
+    data = scene_with(shapes__1__edge_v=[0, 0.8, 0])  # collinear edges: zero area
+    with pytest.raises(SceneError, match=r"shapes\[1\] \('lamp'\): 2 degenerate \(zero-area\) triangle"):
+        load(data)
+
+
+def test_degenerate_triangles_can_be_dropped():
+    data = scene_with(shapes__0={"name": "soup", "type": "triangles", "material": "grey", "drop_degenerate": True,
+                                 "vertices": [[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 0, 0]],
+                                 "triangles": [[0, 1, 2], [0, 1, 3]]})
+    assert load(data).mesh.triangle_count == 3  # 1 kept of the soup + the lamp's 2
+
+
+def test_files_missing_or_malformed(tmp_path):
+    with pytest.raises(SceneError, match=r"nothere.toml: scene file not found"):
+        ps.load_scene(tmp_path / "nothere.toml")
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[camera\nfov = 3")
+    with pytest.raises(SceneError, match=r"bad.toml: not a valid TOML file"):
+        ps.load_scene(bad)
+    missing_mesh = scene_with(shapes__0={"type": "mesh", "file": "bunny.obj", "material": "grey"})
+    with pytest.raises(SceneError, match=r"shapes\[0\].file: mesh file not found: .*bunny.obj"):
+        ps.scene_from_dict(missing_mesh, source="s.toml", base_dir=tmp_path)
+    (tmp_path / "junk.obj").write_text("this is not a mesh\n")
+    junk = scene_with(shapes__0={"type": "mesh", "file": "junk.obj", "material": "grey"})
+    with pytest.raises(SceneError, match=r"shapes\[0\].file: (mesh file .*junk.obj contains no triangles|cannot read)"):
+        ps.scene_from_dict(junk, source="s.toml", base_dir=tmp_path)
+
+
+@pytest.mark.parametrize("suffix", ["obj", "ply"])
+def test_mesh_files_through_trimesh(tmp_path, suffix):
+    trimesh.creation.box(extents=[1, 2, 3]).export(tmp_path / f"box.{suffix}")
+    data = scene_with(shapes__0={"type": "mesh", "file": f"box.{suffix}", "material": "grey",
+                                 "transform": {"scale": 2, "rotate": {"axis": [0, 1, 0], "angle": 90},
+                                               "translate": [10, 0, 0]}})
+    scene = ps.scene_from_dict(data, source="s.toml", base_dir=tmp_path)
+    box = scene.mesh.shape == 0
+    assert box.sum() == 12
+    np.testing.assert_allclose(scene.mesh.area[box].sum(), 4 * 2 * (1 * 2 + 2 * 3 + 1 * 3))
+    corners = scene.mesh.vertices[np.unique(scene.mesh.indices[box])]
+    # Scaled by 2, turned 90 degrees about y (x and z swap), moved to x = 10.
+    np.testing.assert_allclose(corners.min(axis=0), [10 - 3, -2, -1], atol=1e-12)
+    np.testing.assert_allclose(corners.max(axis=0), [10 + 3, 2, 1], atol=1e-12)
+
+
+def test_builtin_shapes():
+    data = scene_with(shapes__0={"type": "sphere", "center": [1, 2, 3], "radius": 0.5, "subdivisions": 4,
+                                 "material": "grey"})
+    data["shapes"].append({"type": "box", "center": [0, 0, -5], "size": [1, 2, 4], "material": "grey",
+                           "flip_normals": True})
+    scene = load(data)
+    sphere, box = scene.mesh.shape == 0, scene.mesh.shape == 2
+    # An inscribed icosphere of 5120 faces has 99.8% of the sphere's area.
+    assert 0.997 < scene.mesh.area[sphere].sum() / (np.pi) < 1.0
+    centroids = scene.mesh.vertices[scene.mesh.indices[sphere]].mean(axis=1) - [1, 2, 3]
+    assert np.all(np.sum(centroids * scene.mesh.normal[:, sphere].T, axis=1) > 0)  # outward
+    np.testing.assert_allclose(scene.mesh.area[box].sum(), 2 * (2 + 8 + 4))
+    centroids = scene.mesh.vertices[scene.mesh.indices[box]].mean(axis=1) - [0, 0, -5]
+    assert np.all(np.sum(centroids * scene.mesh.normal[:, box].T, axis=1) < 0)  # flipped: inward
+
+
+def test_repository_scenes_load():
+    from conftest import ROOT
+
+    for path in sorted((ROOT / "scenes").glob("*/scene.toml")):
+        scene = ps.load_scene(path)
+        assert scene.lights.count > 0, path
