@@ -24,14 +24,15 @@ SELECTION_STRATEGIES = ("power", "uniform")
 class LightSample:
     """Result of :meth:`AreaLights.sample` for N receivers (unit direction wi toward the light)."""
 
-    __slots__ = ("wi", "distance", "point", "normal", "radiance", "pdf_sa", "cos_light")
+    __slots__ = ("wi", "distance", "point", "normal", "radiance", "facing", "pdf_sa", "cos_light")
 
-    def __init__(self, wi, distance, point, normal, radiance, pdf_sa, cos_light):
+    def __init__(self, wi, distance, point, normal, radiance, facing, pdf_sa, cos_light):
         self.wi = wi                  # (3, N) float32, unit, receiver -> light
         self.distance = distance      # (N,) float32
         self.point = point            # (3, N) float32, sampled point on the light
         self.normal = normal          # (3, N) float32, unit geometric normal of the light triangle
-        self.radiance = radiance      # (3, N) float64, Le toward the receiver (0 behind a one-sided light)
+        self.radiance = radiance      # (3, N) float64, Le of the sampled triangle
+        self.facing = facing          # (N,) bool, whether it emits toward the receiver (one-sided lights)
         self.pdf_sa = pdf_sa          # (N,) float64, solid-angle pdf at the receiver (inf if degenerate)
         self.cos_light = cos_light    # (N,) float32, dot(normal, -wi)
 
@@ -78,6 +79,7 @@ class AreaLights:
             self.cdf /= self.cdf[-1]
         # pmf / area per emitter: the area density of a light sample on that triangle.
         self.pdf_area = np.divide(self.pmf, self.area, out=np.zeros_like(self.pmf), where=self.area > 0)
+        self.table = np.take(mesh.table, self.triangles, axis=1)  # geometry rows of the emitting triangles
 
     @property
     def count(self) -> int:
@@ -92,18 +94,19 @@ class AreaLights:
         """Sample a point on the lights for each receiver point (3, N); u: (3, N) uniforms in [0, 1)."""
         emitter = np.minimum(np.searchsorted(self.cdf, u[0], side="right"), self.count - 1)
         b1, b2 = square_to_uniform_triangle(u[1:3])
-        point, normal = self.mesh.hit_geometry(self.triangles.take(emitter), b1.astype(np.float32),
-                                               b2.astype(np.float32))
+        rows = np.take(self.table, emitter, axis=1)
+        point = rows[0:3] + rows[3:6] * b1.astype(np.float32) + rows[6:9] * b2.astype(np.float32)
+        normal = rows[9:12]
         wi = point - receivers
         dist2 = dot(wi, wi)
         distance = np.sqrt(dist2)
         wi /= distance
         cos_light = -dot(normal, wi)
         facing = self.two_sided.take(emitter) | (cos_light > 0)
-        radiance = np.take(self.radiance, emitter, axis=1) * facing
         with np.errstate(divide="ignore", invalid="ignore"):
             pdf_sa = self.pdf_area.take(emitter) * dist2.astype(np.float64) / np.abs(cos_light).astype(np.float64)
-        return LightSample(wi, distance, point, normal, radiance, pdf_sa, cos_light)
+        return LightSample(wi, distance, point, normal, np.take(self.radiance, emitter, axis=1), facing, pdf_sa,
+                           cos_light)
 
     def pdf_sa(self, tri: np.ndarray, distance: np.ndarray, cos_light: np.ndarray) -> np.ndarray:
         """Solid-angle pdf with which :meth:`sample` would have produced a point on triangle ``tri``.

@@ -7,9 +7,9 @@ arrays, indexed by the material id stored per triangle.
 Estimator side: each model has vectorised functions over lanes that all use
 it, in world space: ``n`` is the unit geometric normal turned toward the
 outgoing direction ``wo`` (directions point away from the surface), so
-two-sided models need no flips.  ``f_cos`` returns f(wo, wi) |cos theta_i|,
-``pdf`` the solid-angle density of ``sample``, and ``sample`` a direction
-with its weight f |cos theta_i| / pdf and its pdf.
+two-sided models need no flips.  For the Lambertian model, f |cos theta_i|
+is the albedo (a per-lane colour) times a scalar, and the two are kept apart
+so that colour arithmetic happens once per lane.
 
 The diffuse model is two-sided: it reflects on whichever side wo lies and
 never transmits.
@@ -22,7 +22,7 @@ import numpy as np
 
 from . import warp
 
-__all__ = ["Diffuse", "MaterialTable", "diffuse_f_cos", "diffuse_pdf", "diffuse_sample"]
+__all__ = ["Diffuse", "MaterialTable", "diffuse_cos_over_pi", "diffuse_sample"]
 
 
 @dataclass(frozen=True)
@@ -62,27 +62,24 @@ class MaterialTable:
         return "MaterialTable(" + ", ".join(f"{n}={m}" for n, m in zip(self.names, self.materials)) + ")"
 
 
-def diffuse_f_cos(albedo: np.ndarray, cos_i: np.ndarray) -> np.ndarray:
-    """f |cos theta_i| = albedo / pi * max(cos_i, 0), with cos_i = dot(n, wi); (3, N) float64."""
-    return albedo * (np.maximum(cos_i, 0).astype(np.float64) * warp.INV_PI)
+def diffuse_cos_over_pi(cos_i: np.ndarray) -> np.ndarray:
+    """The scalar part of a Lambertian f |cos theta_i| = albedo * max(cos_i, 0) / pi, as float64.
 
-
-def diffuse_pdf(cos_i: np.ndarray) -> np.ndarray:
-    """Solid-angle density of :func:`diffuse_sample`: max(cos_i, 0) / pi."""
+    ``cos_i`` = dot(n, wi) with n on the side of wo; it is also the solid-angle
+    density of :func:`diffuse_sample`.
+    """
     return np.maximum(cos_i, 0).astype(np.float64) * warp.INV_PI
 
 
-def diffuse_sample(albedo: np.ndarray, n: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Cosine-weighted direction about n (the normal on the side of wo).
+def diffuse_sample(n: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Cosine-weighted direction about n (the normal on the side of wo), and its solid-angle pdf.
 
-    Returns (wi (3, N) float32, weight f |cos| / pdf = albedo (3, N), pdf (N,)).
-    Uses the fact that n + (a uniform point on the unit sphere), normalised, is
-    cosine distributed about n (a consequence of Archimedes' hat-box theorem),
-    which needs no tangent frame.
+    The sample weight f |cos| / pdf is the albedo.  Uses the fact that n + (a
+    uniform point on the unit sphere), normalised, is cosine distributed about
+    n (Archimedes' hat-box theorem), which needs no tangent frame.
     """
     wi = n + warp.square_to_uniform_sphere(u)
     length = np.sqrt(wi[0] * wi[0] + wi[1] * wi[1] + wi[2] * wi[2])
     # The sum vanishes only when the sphere point is exactly -n (probability 0).
     wi = np.where(length > 1e-6, wi / np.maximum(length, np.float32(1e-6)), n)
-    cos_i = wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2]
-    return wi, albedo, diffuse_pdf(cos_i)
+    return wi, diffuse_cos_over_pi(wi[0] * n[0] + wi[1] * n[1] + wi[2] * n[2])

@@ -16,13 +16,12 @@ HEURISTICS = ("balance", "power")
 
 def mis_weight(pdf_a: np.ndarray, pdf_b: np.ndarray, heuristic: str = "power", beta: float = 2.0) -> np.ndarray:
     """Weight of strategy a against strategy b (both pdfs in the same measure), float64."""
-    pdf_a = np.asarray(pdf_a, dtype=np.float64)
-    pdf_b = np.asarray(pdf_b, dtype=np.float64)
+    if heuristic not in HEURISTICS:
+        raise ValueError(f"MIS heuristic: expected one of {HEURISTICS}, got {heuristic!r}")
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
-        ratio = pdf_b / pdf_a
+        ratio = np.asarray(pdf_b, dtype=np.float64) / pdf_a  # 0/x -> 0, x/0 -> inf, 0/0 -> nan
         if heuristic == "power":
-            ratio = ratio ** beta if beta != 2.0 else ratio * ratio
-        elif heuristic != "balance":
-            raise ValueError(f"MIS heuristic: expected one of {HEURISTICS}, got {heuristic!r}")
-        w = 1.0 / (1.0 + ratio)
-    return np.where(pdf_a > 0, np.where(pdf_b > 0, w, 1.0), 0.0)
+            ratio = ratio * ratio if beta == 2.0 else ratio ** beta
+        weight = np.asarray(1.0 / (1.0 + ratio))  # ratio inf -> 0
+    weight[weight != weight] = 0.0  # both pdfs zero (or both infinite): the strategy does not apply
+    return weight

@@ -135,17 +135,19 @@ class PathTracer:
                 break
             u = sampler.draw(DIMS_PER_BOUNCE)
             albedo = np.take(reflectance, scene.mesh.material.take(prim), axis=1)
+            # Throughput after this vertex: the diffuse sample weight f |cos| / pdf is the albedo.
+            beta_next = beta * albedo
             if use_nee:
-                radiance += self._next_event(scene, threads, p, normal, albedo, beta, u[0:3], eps)
+                radiance += self._next_event(scene, threads, p, normal, beta_next, u[0:3], eps)
                 rays += lane.size
 
-            # Sample the next direction from the BSDF; reflection leaves on the side of the normal.
-            direction, weight, pdf_prev = materials.diffuse_sample(albedo, normal, u[3:5])
-            beta *= weight
+            # Sample the next direction; reflection leaves on the side of the normal.
+            direction, pdf_prev = materials.diffuse_sample(normal, u[3:5])
+            beta = beta_next
             origin = p + normal * eps
 
-            survival = self.roulette.survival(depth, beta, weight)
-            keep = np.maximum(np.maximum(weight[0], weight[1]), weight[2]) > 0
+            survival = self.roulette.survival(depth, beta, albedo)
+            keep = np.maximum(np.maximum(albedo[0], albedo[1]), albedo[2]) > 0
             if survival is not None:
                 keep &= u[5] < survival
                 beta /= survival
@@ -158,28 +160,28 @@ class PathTracer:
         _retire(result, lane, radiance, np.zeros(lane.size, dtype=bool))
         return ItemResult(values=result, rays=rays)
 
-    def _next_event(self, scene, threads, p, normal, albedo, beta, u, eps) -> np.ndarray:
+    def _next_event(self, scene, threads, p, normal, beta_albedo, u, eps) -> np.ndarray:
         """Light-sampled direct illumination of every lane, MIS-weighted against BSDF sampling; (3, N).
 
         Estimates Le f |cos| / p_light (Veach 1997, eq. 9.4) with one point on
         one light per lane and one shadow ray where the contribution is non-zero.
+        ``beta_albedo`` is the path throughput times the albedo of the vertex.
         """
-        lights = scene.lights
-        ls = lights.sample(p, u)
-        cos_i = dot(normal, ls.wi)
-        contribution = beta * materials.diffuse_f_cos(albedo, cos_i) * ls.radiance
+        ls = scene.lights.sample(p, u)
+        cos_over_pi = materials.diffuse_cos_over_pi(dot(normal, ls.wi))
         with np.errstate(divide="ignore", invalid="ignore"):
-            contribution /= ls.pdf_sa
+            scale = np.where(ls.facing, cos_over_pi / ls.pdf_sa, 0.0)
         if self.light_sampling == "mis":
-            contribution *= mis_weight(ls.pdf_sa, materials.diffuse_pdf(cos_i), self.mis, self.mis_beta)
-        useful = np.flatnonzero(np.maximum(np.maximum(contribution[0], contribution[1]), contribution[2]) > 0)
-        visible = np.zeros(p.shape[1], dtype=bool)
+            scale *= mis_weight(ls.pdf_sa, cos_over_pi, self.mis, self.mis_beta)
+        useful = np.flatnonzero(scale > 0)
         if useful.size:
             start = np.take(p, useful, axis=1) + np.take(normal, useful, axis=1) * eps
             end = offset_along(np.take(ls.point, useful, axis=1), np.take(ls.normal, useful, axis=1),
                                ls.cos_light.take(useful), eps)
-            visible[useful] = ~scene.accel.occluded(start, end - start, 0.0, 1.0, threads=threads)
-        return np.where(visible, contribution, 0.0)
+            blocked = scene.accel.occluded(start, end - start, 0.0, 1.0, threads=threads)
+            scale[useful[blocked]] = 0.0
+        scale[scale != scale] = 0.0  # NaN from degenerate light samples (receiver on the light)
+        return beta_albedo * (ls.radiance * scale)
 
 
 def _take(indices: np.ndarray, *arrays: np.ndarray) -> list[np.ndarray]:

@@ -1,12 +1,17 @@
-"""Traversal benchmark: Accel.intersect / occluded against a plain C loop over Embree.
+"""Foundation benchmark: ray traversal and path tracing on the Cornell box, with ratios measured in one run.
 
-Both sides trace the same rays through the same Embree scene (robust build of
-the Cornell box) on one thread; the plain loop (plain_loop.c, compiled here
-with the system C compiler) calls rtcIntersect1 per ray, and, as a second
-baseline, rtcIntersect16 on packets packed before the clock starts.  Accel
-also runs on every core.  Ratios are measured in the same run.
+1. Traversal: Accel.intersect / occluded against a plain C loop over the same
+   Embree scene (robust build) and the same rays, one thread each.  The plain
+   loop (plain_loop.c, compiled here with the system C compiler) calls
+   rtcIntersect1/rtcOccluded1 per ray and, as a second baseline,
+   rtcIntersect16/rtcOccluded16 on packets packed before its clock starts.
+   Accel also runs on every core.
+2. Path tracing at 256x256: pathspace's "pt" against Mitsuba 3's scalar_rgb
+   path integrator (box filter, unbounded depth) on mitsuba.cornell_box() at
+   the same spp, if Mitsuba is installed (pip install mitsuba); each renderer
+   uses every core.
 
-    python benchmarks/traversal.py [--rays 1000000] [--repeats 5]
+    python benchmarks/foundation.py [--rays 1000000] [--repeats 5] [--spp 64]
 """
 from __future__ import annotations
 
@@ -68,13 +73,8 @@ def best_of(repeats: int, fn) -> float:
     return min(times)
 
 
-def main(argv=None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--rays", type=int, default=1_000_000)
-    parser.add_argument("--repeats", type=int, default=5)
-    args = parser.parse_args(argv)
-
-    scene = ps.load_scene(ROOT / "scenes" / "cornell-box" / "scene.toml")
+def traversal(scene, args) -> None:
+    """Rays per second of Accel against the plain C loops."""
     accel = scene.accel
     vertices = np.ascontiguousarray(scene.mesh.vertices, dtype=np.float32)
     indices = scene.mesh.indices
@@ -101,6 +101,58 @@ def main(argv=None) -> None:
               f"plain C 16-wide pre-packed {mrays(base[16]):6.2f} | Accel 1 thread {mrays(one):6.2f} "
               f"({one and base[1] / one:.2f}x the rtc*1 loop, {base[16] / one:.2f}x the pre-packed loop) | "
               f"Accel {cores} threads {mrays(every):6.2f}")
+
+
+def mitsuba_samples_per_second(spp: int, repeats: int):
+    """Samples per second and mean pixel value of Mitsuba 3 scalar_rgb on its Cornell box, or None."""
+    try:
+        import mitsuba as mi
+    except ImportError:
+        return None
+    mi.set_variant("scalar_rgb")
+    config = mi.cornell_box()
+    config["sensor"]["film"]["rfilter"] = {"type": "box"}
+    config["sensor"]["film"]["width"] = config["sensor"]["film"]["height"] = 256
+    config["integrator"] = {"type": "path", "max_depth": -1}
+    mscene = mi.load_dict(config)
+    mi.render(mscene, spp=1)
+    best, image = np.inf, None
+    for _ in range(repeats):
+        t0 = time.perf_counter()
+        image = np.array(mi.render(mscene, spp=spp))
+        best = min(best, time.perf_counter() - t0)
+    return 256 * 256 * spp / best, image.mean(axis=(0, 1)), mi.__version__
+
+
+def path_tracing(scene, args) -> None:
+    """Samples per second of pathspace's path tracer, beside Mitsuba 3's."""
+    ps.render(scene, spp=1, seed=0)
+    best, result = np.inf, None
+    for repeat in range(args.pt_repeats):
+        result = ps.render(scene, spp=args.spp, seed=repeat)
+        best = min(best, result.stats["seconds"])
+    ours = 256 * 256 * args.spp / best
+    print(f"path tracing, Cornell box 256x256, {args.spp} spp, best of {args.pt_repeats}:")
+    print(f"  pathspace pt      {ours / 1e6:6.3f} M samples/s  (mean pixel {np.round(result.image.mean(axis=(0, 1)), 4)})")
+    theirs = mitsuba_samples_per_second(args.spp, args.pt_repeats)
+    if theirs is None:
+        print("  Mitsuba 3 not installed (pip install mitsuba): no comparison")
+        return
+    rate, mean, version = theirs
+    print(f"  Mitsuba {version} scalar_rgb {rate / 1e6:6.3f} M samples/s  (mean pixel {np.round(mean, 4)})")
+    print(f"  ratio pathspace / Mitsuba: {ours / rate:.2f}")
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--rays", type=int, default=1_000_000, help="rays per traversal query")
+    parser.add_argument("--repeats", type=int, default=5, help="repeats of each traversal timing (best is kept)")
+    parser.add_argument("--spp", type=int, default=64, help="samples per pixel of the path-tracing renders")
+    parser.add_argument("--pt-repeats", type=int, default=3, help="repeats of each render (best is kept)")
+    args = parser.parse_args(argv)
+    scene = ps.load_scene(ROOT / "scenes" / "cornell-box" / "scene.toml")
+    traversal(scene, args)
+    path_tracing(scene, args)
 
 
 if __name__ == "__main__":
