@@ -6,7 +6,7 @@
  * any strides) plus tmin/tmax (scalars or (N,) arrays).  Closest-hit queries
  * are packed into 16-wide SoA packets for rtcIntersect16; occlusion queries
  * call rtcOccluded1 per ray (faster on incoherent rays, as measured by
- * benchmarks/traversal.py).  Both run on a configurable number of threads with
+ * benchmarks/foundation.py).  Both run on a configurable number of threads with
  * the GIL released.  Work is handed out in
  * chunks through an atomic counter, so threads that draw cheap rays take more.
  *
@@ -32,6 +32,7 @@
 #define PACKET 16
 #define CHUNK_RAYS 512             /* rays handed to a thread at a time */
 #define MIN_RAYS_PER_THREAD 4096   /* below this, extra threads cost more than they save */
+#define MAX_THREADS 256
 
 typedef struct {
     PyObject_HEAD
@@ -173,12 +174,9 @@ static inline int read_ray(const Query *q, npy_intp i, float r[8])
     double ox = vec3_get(&q->org, i, 0), oy = vec3_get(&q->org, i, 1), oz = vec3_get(&q->org, i, 2);
     double dx = vec3_get(&q->dir, i, 0), dy = vec3_get(&q->dir, i, 1), dz = vec3_get(&q->dir, i, 2);
     double t0 = scalar_get(&q->tmin, i), t1 = scalar_get(&q->tmax, i);
-    if (!(isfinite(ox) && isfinite(oy) && isfinite(oz) && isfinite(dx) && isfinite(dy) && isfinite(dz)))
+    if (isnan(t1))
         return 0;
-    if (dx == 0.0 && dy == 0.0 && dz == 0.0)
-        return 0;
-    if (!(t0 >= 0.0) || !isfinite(t0) || isnan(t1))
-        return 0;
+    /* Checked after the conversion: values that overflow or underflow float32 are invalid too. */
     r[0] = (float)ox;
     r[1] = (float)oy;
     r[2] = (float)oz;
@@ -187,7 +185,12 @@ static inline int read_ray(const Query *q, npy_intp i, float r[8])
     r[5] = (float)dy;
     r[6] = (float)dz;
     r[7] = t1 > 3.0e38 ? INFINITY : (float)t1;
-    return 1;
+    for (int k = 0; k < 7; ++k)
+        if (!isfinite(r[k]))
+            return 0;
+    if (r[4] == 0.0f && r[5] == 0.0f && r[6] == 0.0f)
+        return 0;
+    return r[3] >= 0.0f;
 }
 
 static void note_bad_ray(Query *q, npy_intp i)
@@ -198,7 +201,7 @@ static void note_bad_ray(Query *q, npy_intp i)
 }
 
 /* Occlusion: one rtcOccluded1 call per ray.  On incoherent rays it measured
- * faster than rtcOccluded16 (benchmarks/traversal.py), while closest-hit
+ * faster than rtcOccluded16 (benchmarks/foundation.py), while closest-hit
  * queries are fastest in 16-wide packets. */
 static void occlude_range(Query *q, npy_intp begin, npy_intp end)
 {
@@ -230,7 +233,7 @@ static void occlude_range(Query *q, npy_intp begin, npy_intp end)
 static void intersect_range(Query *q, npy_intp begin, npy_intp end)
 {
     struct RTCRayHit16 rh;
-    int valid[PACKET];
+    _Alignas(64) int valid[PACKET]; /* Embree requires the mask aligned like the packet */
     for (npy_intp p = begin; p < end; p += PACKET) {
         int count = (int)(end - p < PACKET ? end - p : PACKET);
         int any = 0;
@@ -311,9 +314,9 @@ static void run_query(Query *q, int threads)
     npy_intp max_useful = q->n / MIN_RAYS_PER_THREAD;
     if (threads > max_useful)
         threads = (int)(max_useful > 1 ? max_useful : 1);
-    pthread_t ids[256];
-    if (threads > 256)
-        threads = 256;
+    pthread_t ids[MAX_THREADS];
+    if (threads > MAX_THREADS)
+        threads = MAX_THREADS;
     int started = 0;
     for (int k = 1; k < threads; ++k) {
         if (pthread_create(&ids[started], NULL, trace_worker, q) == 0)
@@ -333,11 +336,14 @@ static PyObject *describe_bad_ray(const Query *q, npy_intp i)
     }
     double t0 = scalar_get(&q->tmin, i), t1 = scalar_get(&q->tmax, i);
     char text[512];
-    const char *why = "its origin or direction is not finite";
-    if (isfinite(o[0]) && isfinite(o[1]) && isfinite(o[2]) && isfinite(d[0]) && isfinite(d[1]) && isfinite(d[2])) {
-        if (d[0] == 0.0 && d[1] == 0.0 && d[2] == 0.0)
-            why = "its direction is the zero vector";
-        else if (!(t0 >= 0.0) || !isfinite(t0))
+    const char *why = "its origin or direction is not finite in float32";
+    int finite = 1;
+    for (int c = 0; c < 3; ++c)
+        finite &= isfinite((float)o[c]) && isfinite((float)d[c]);
+    if (finite) {
+        if ((float)d[0] == 0.0f && (float)d[1] == 0.0f && (float)d[2] == 0.0f)
+            why = "its direction is the zero vector (in float32)";
+        else if (!(t0 >= 0.0) || !isfinite((float)t0))
             why = "tmin must be finite and >= 0";
         else
             why = "tmax is NaN";
@@ -389,8 +395,9 @@ static int parse_query(PsAccel *self, PyObject *args, PyObject *kwargs, Query *q
     } else if (make_scalar_view(tmax, "tmax", q->n, &q->tmax) < 0) {
         return -1;
     }
-    if (*threads < 0) {
-        PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: the Accel's default), got %d", *threads);
+    if (*threads < 0 || *threads > MAX_THREADS) {
+        PyErr_Format(PyExc_ValueError, "threads must be between 0 (the Accel's default) and %d, got %d", MAX_THREADS,
+                     *threads);
         return -1;
     }
     if (*threads == 0)
@@ -505,8 +512,9 @@ static int Accel_init(PsAccel *self, PyObject *args, PyObject *kwargs)
         PyErr_SetString(PyExc_RuntimeError, "Accel is already initialised");
         return -1;
     }
-    if (threads < 0) {
-        PyErr_Format(PyExc_ValueError, "threads must be >= 0 (0: all available cores), got %d", threads);
+    if (threads < 0 || threads > MAX_THREADS) {
+        PyErr_Format(PyExc_ValueError, "threads must be between 0 (all available cores) and %d, got %d", MAX_THREADS,
+                     threads);
         return -1;
     }
     PyArrayObject *verts = require_table(vobj, "vertices", NPY_FLOAT, "float32");
@@ -604,11 +612,15 @@ static PyObject *Accel_get_threads(PsAccel *self, void *closure)
 static int Accel_set_threads(PsAccel *self, PyObject *value, void *closure)
 {
     (void)closure;
-    long n = value ? PyLong_AsLong(value) : -1;
+    if (value == NULL) {
+        PyErr_SetString(PyExc_AttributeError, "the threads attribute cannot be deleted");
+        return -1;
+    }
+    long n = PyLong_AsLong(value);
     if (n == -1 && PyErr_Occurred())
         return -1;
-    if (n < 0 || n > 1024) {
-        PyErr_SetString(PyExc_ValueError, "threads must be between 0 (all cores) and 1024");
+    if (n < 0 || n > MAX_THREADS) {
+        PyErr_Format(PyExc_ValueError, "threads must be between 0 (all cores) and %d", MAX_THREADS);
         return -1;
     }
     self->threads = n > 0 ? (int)n : ps_default_thread_count();

@@ -83,8 +83,9 @@ struct RTCRayHit {
     struct RTCHit hit;
 };
 
-/* Function table filled by dlsym.  Argument structs are passed as NULL
- * (Embree then uses its defaults: incoherent rays, all features). */
+/* Function table filled by dlsym (the extension loads all but rtcIntersect1 and rtcOccluded16,
+ * which only the benchmark's plain loop uses).  Argument structs are passed as NULL (Embree then
+ * uses its defaults: incoherent rays, all features). */
 typedef struct EmbreeAPI {
     RTCDevice (*rtcNewDevice)(const char *config);
     void (*rtcReleaseDevice)(RTCDevice device);

@@ -10,17 +10,22 @@
 #include "native.h"
 
 #include <dlfcn.h>
+#include <pthread.h>
 #include <string.h>
 
 EmbreeAPI ps_embree;
 RTCDevice ps_embree_device = NULL;
 static char embree_path[4096];
 static char last_error[1024];
+static pthread_mutex_t last_error_lock = PTHREAD_MUTEX_INITIALIZER;
 
+/* Embree may report errors from its own worker threads. */
 static void record_error(void *user_ptr, enum RTCError code, const char *str)
 {
     (void)user_ptr;
+    pthread_mutex_lock(&last_error_lock);
     snprintf(last_error, sizeof(last_error), "Embree error %d: %s", (int)code, str ? str : "(no message)");
+    pthread_mutex_unlock(&last_error_lock);
 }
 
 const char *ps_embree_last_error(void) { return last_error[0] ? last_error : "unknown Embree error"; }
@@ -86,7 +91,6 @@ PyObject *ps_load_embree(PyObject *module, PyObject *args)
     LOAD_SYMBOL(rtcCommitGeometry);
     LOAD_SYMBOL(rtcAttachGeometry);
     LOAD_SYMBOL(rtcReleaseGeometry);
-    LOAD_SYMBOL(rtcIntersect1);
     LOAD_SYMBOL(rtcIntersect16);
     LOAD_SYMBOL(rtcOccluded1);
 

@@ -19,11 +19,15 @@ static PyObject *default_thread_count(PyObject *module, PyObject *unused)
 static PyObject *tune_allocator(PyObject *module, PyObject *args)
 {
     (void)module;
-    long mmap_threshold, trim_threshold;
-    if (!PyArg_ParseTuple(args, "ll:tune_allocator", &mmap_threshold, &trim_threshold))
+    int mmap_threshold, trim_threshold;
+    if (!PyArg_ParseTuple(args, "ii:tune_allocator", &mmap_threshold, &trim_threshold))
         return NULL;
+    if (mmap_threshold <= 0 || trim_threshold <= 0) {
+        PyErr_SetString(PyExc_ValueError, "thresholds must be positive byte counts (below 2**31)");
+        return NULL;
+    }
 #ifdef __GLIBC__
-    if (mallopt(M_MMAP_THRESHOLD, (int)mmap_threshold) == 1 && mallopt(M_TRIM_THRESHOLD, (int)trim_threshold) == 1)
+    if (mallopt(M_MMAP_THRESHOLD, mmap_threshold) == 1 && mallopt(M_TRIM_THRESHOLD, trim_threshold) == 1)
         Py_RETURN_TRUE;
 #endif
     Py_RETURN_FALSE;

@@ -132,8 +132,18 @@ def test_query_validation():
         accel.intersect(ok, ok, -1.0)
     with pytest.raises(ValueError, match="tmax is NaN"):
         accel.intersect(ok, ok, 0.0, np.nan)
-    with pytest.raises(ValueError, match="threads must be >= 0"):
+    with pytest.raises(ValueError, match="threads must be between 0"):
         accel.intersect(ok, ok, threads=-1)
+    with pytest.raises(ValueError, match="threads must be between 0"):
+        accel.threads = 100_000
+    # Values that are finite in float64 but not in float32 are rejected, not traced as silent misses.
+    huge = ok.astype(np.float64)
+    huge[0, 1] = 1e39
+    with pytest.raises(ValueError, match="invalid ray 1: its origin or direction is not finite in float32"):
+        accel.intersect(huge, ok)
+    tiny = ok.astype(np.float64) * 1e-50
+    with pytest.raises(ValueError, match="invalid ray 0: its direction is the zero vector"):
+        accel.occluded(ok, tiny)
 
 
 def test_missing_embreex_is_reported_plainly(monkeypatch):

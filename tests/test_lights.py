@@ -1,70 +1,142 @@
-"""Area light sampling: selection pmf, consistency of sample() with pdf_sa(), and an unbiased estimate."""
+"""Light sampling: selection pmfs, sample() against pdf_hit(), unbiased solid-angle estimates, delta lights."""
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 import pathspace as ps
+from pathspace.colours import RGBColours
+from pathspace.validate import chi2_test_directions
 from conftest import cornell_dict
 
 
-def two_light_scene(selection_radiance=(1.0, 8.0)):
+def two_light_scene(extra_lights=()):
     data = cornell_dict((8, 8))
-    data["shapes"][0]["emitter"] = {"radiance": [selection_radiance[0]] * 3}
+    data["shapes"][0]["emitter"] = {"radiance": [1.0] * 3}
     data["shapes"].append({"name": "lamp2", "type": "quad", "corner": [-0.9, -0.5, -0.99], "edge_u": [0.3, 0, 0],
                            "edge_v": [0, 0.2, 0], "material": "white",
-                           "emitter": {"radiance": [selection_radiance[1]] * 3, "two_sided": True}})
+                           "emitter": {"radiance": [8.0] * 3, "two_sided": True}})
+    data["lights"] = list(extra_lights)
     return ps.scene_from_dict(data)
 
 
-def test_power_pmf_and_sample_pdf_agree_with_pdf_sa():
+def spherical_triangle_omega(v, point):
+    p = v - point
+    a, b, c = p
+    numerator = np.dot(a, np.cross(b, c))
+    la, lb, lc = np.linalg.norm(p, axis=1)
+    denominator = la * lb * lc + np.dot(a, b) * lc + np.dot(a, c) * lb + np.dot(b, c) * la
+    return abs(2 * np.arctan2(numerator, denominator))
+
+
+@pytest.mark.parametrize("measure", ["area", "solid_angle"])
+@pytest.mark.parametrize("selection", ["power", "uniform"])
+def test_sample_pdf_agrees_with_pdf_hit(selection, measure):
     scene = two_light_scene()
     lights = scene.lights
-    power = lights.area * lights.radiance.mean(axis=0) * np.where(lights.two_sided, 2, 1)
-    np.testing.assert_allclose(lights.pmf, power / power.sum())
     rng = np.random.default_rng(0)
-    receivers = rng.uniform(-0.8, 0.8, (3, 10_000)).astype(np.float32)
-    s = lights.sample(receivers, rng.random((3, 10_000)))
-    # Which triangle was sampled: recover it by tracing the sampled direction.
+    receivers = rng.uniform(-0.8, 0.8, (3, 20_000)).astype(np.float32)
+    s = lights.sample(receivers, rng.random((3, 20_000)), RGBColours, selection, measure)
+    # Recover the sampled triangle by tracing the sampled direction.
     hits = scene.accel.intersect(receivers, s.wi)
-    reached = np.isclose(hits.t, s.distance, rtol=1e-4) & (lights.emitter_of_triangle[hits.prim] >= 0)
+    reached = np.isclose(hits.t, s.distance, rtol=1e-4) & (lights.area.emitter_of_triangle[hits.prim] >= 0)
     assert reached.sum() > 2000  # unoccluded samples to compare (receivers may sit inside the boxes)
-    again = lights.pdf_sa(hits.prim[reached], s.distance[reached], s.cos_light[reached])
-    np.testing.assert_allclose(again, s.pdf_sa[reached], rtol=1e-5)
+    points = receivers[:, reached] + s.wi[:, reached] * s.distance[reached]
+    again = lights.pdf_hit(hits.prim[reached], receivers[:, reached], points, selection, measure)
+    np.testing.assert_allclose(again, s.pdf[reached], rtol=2e-3)
 
 
-def test_light_sampling_estimates_the_emitted_power_fraction():
-    """E[Le |cos_light| ... ] checks: the solid-angle pdf integrates the light's projected solid angle.
+@pytest.mark.parametrize("measure", ["area", "solid_angle"])
+def test_light_sampling_integrates_the_subtended_solid_angle(measure):
+    """E[1 / pdf] over light samples (pmf included) = the total solid angle of the lights seen from a point.
 
-    For a receiver point, sum over light samples of 1/pdf_sa estimates the total solid angle the lights
-    subtend (one-sided lights only from the front); compare with dense quadrature of the same integral.
+    One receiver in front of the one-sided ceiling lamp, one behind it (above the lamp plane, where it sees
+    the lamp's back): samples of the back side must carry no radiance.
     """
     scene = two_light_scene()
     lights = scene.lights
-    point = np.array([[0.1], [-0.3], [0.2]], dtype=np.float32)
-    rng = np.random.default_rng(1)
-    n = 400_000
-    s = lights.sample(np.repeat(point, n, axis=1), rng.random((3, n)))
-    visible_side = s.radiance[0] > 0
-    estimate = np.where(visible_side, 1.0 / s.pdf_sa, 0.0)
-    mean, error = estimate.mean(), estimate.std() / np.sqrt(n)
-    # Quadrature: solid angle of each emitting triangle seen from the point (front side for one-sided).
-    exact = 0.0
-    for e, tri in enumerate(lights.triangles):
-        p = scene.mesh.vertices[scene.mesh.indices[tri]] - point[:, 0]
-        a, b, c = p
-        numerator = np.dot(a, np.cross(b, c))
-        la, lb, lc = np.linalg.norm(p, axis=1)
-        denominator = la * lb * lc + np.dot(a, b) * lc + np.dot(a, c) * lb + np.dot(b, c) * la
-        omega = abs(2 * np.arctan2(numerator, denominator))
-        facing = np.dot(scene.mesh.normal[:, tri], -p.mean(axis=0)) > 0
-        exact += omega if (lights.two_sided[e] or facing) else 0.0
-    assert abs(mean - exact) < 4 * error
-    assert error < 0.01 * exact
+    for point, lamp_visible in ((np.array([0.1, -0.3, 0.2]), True), (np.array([0.0, 0.995, 0.0]), False)):
+        n = 400_000
+        s = lights.sample(np.repeat(point[:, None].astype(np.float32), n, axis=1),
+                          np.random.default_rng(1).random((3, n)), RGBColours, "power", measure)
+        emitting = s.value[0] > 0
+        estimate = np.where(emitting, 1.0 / s.pdf, 0.0)
+        mean, error = estimate.mean(), estimate.std() / np.sqrt(n)
+        exact = 0.0
+        for e, tri in enumerate(lights.area.triangles):
+            v = scene.mesh.vertices[scene.mesh.indices[tri]]
+            facing = np.dot(scene.mesh.normal[:, tri], point - v.mean(axis=0)) > 0
+            if lights.area.two_sided[e] or facing:
+                exact += spherical_triangle_omega(v, point)
+        assert abs(mean - exact) < 4 * error + 1e-12, (point, mean, exact, error)
+        if not lamp_visible:
+            # Samples on the one-sided ceiling lamp (normal -y) seen from above reach its back: no radiance.
+            on_lamp = s.normal[1] < -0.5
+            assert on_lamp.sum() > 1000 and not np.any(emitting & on_lamp)
 
 
-def test_uniform_selection():
-    scene = two_light_scene()
-    lights = ps.lights.AreaLights(scene.mesh, scene.lights.triangles, scene.lights.radiance, scene.lights.two_sided,
-                                  scene.lights.light_of, selection="uniform")
-    per_light = np.bincount(lights.light_of, weights=lights.pmf)
-    np.testing.assert_allclose(per_light, [0.5, 0.5])
+def test_solid_angle_sampling_is_uniform_over_the_triangle_chi2():
+    from pathspace.lights.spherical_triangle import sample_spherical_triangle, solid_angle
+
+    v = np.array([[-0.3, 0.2, -1.0], [0.6, 0.1, -0.8], [0.1, 0.9, -1.2]])
+    ref = np.zeros((3, 1))
+    omega = float(solid_angle(v[0][:, None], v[1][:, None], v[2][:, None], ref)[0])
+
+    def sample(u):
+        count = u.shape[1]
+        rep = [np.repeat(x[:, None], count, axis=1) for x in v]
+        w, _ = sample_spherical_triangle(*rep, np.zeros((3, count)), u)
+        return w, np.all(np.isfinite(w), axis=0)
+
+    def pdf(w):
+        # Inside the spherical triangle iff the ray hits the planar triangle.
+        e1, e2 = v[1] - v[0], v[2] - v[0]
+        s1 = np.cross(w.T, e2)
+        det = s1 @ e1
+        b1 = (-(v[0]) @ s1.T) / det
+        b2 = np.einsum("ij,ij->i", w.T, np.cross(-v[0], e1)[None, :].repeat(w.shape[1], 0)) / det
+        t = (np.cross(-v[0], e1) @ e2) / det
+        tolerance = 1e-6  # directions along the edges, within float rounding of inside
+        inside = (b1 >= -tolerance) & (b2 >= -tolerance) & (b1 + b2 <= 1 + tolerance) & (t > 0)
+        return np.where(inside, 1.0 / omega, 0.0)
+
+    result = chi2_test_directions(sample, pdf, sample_count=300_000, res_z=64, res_phi=128, seed=3)
+    assert result.passed, str(result)
+
+
+def test_selection_pmfs():
+    scene = two_light_scene([{"type": "point", "position": [0, 0.5, 0], "intensity": [2, 2, 2]},
+                             {"type": "environment", "radiance": [0.1, 0.1, 0.1]}])
+    lights = scene.lights
+    power = lights.power
+    np.testing.assert_allclose(lights.pmf("power"), power / power.sum())
+    np.testing.assert_allclose(np.bincount(lights.light_id, weights=lights.pmf("uniform")), [0.25] * 4)
+    np.testing.assert_allclose(power[-2], 4 * np.pi * 2.0)  # point: 4 pi I
+
+
+def test_delta_and_environment_samples():
+    scene = two_light_scene([{"type": "point", "position": [0, 0.5, 0], "intensity": [2, 2, 2]},
+                             {"type": "spot", "position": [0, 0.9, 0], "look_at": [0, -1, 0], "intensity": [5, 5, 5],
+                              "cone_angle": 30, "falloff_start": 20},
+                             {"type": "directional", "direction": [0, -1, 0], "irradiance": [1, 2, 3]},
+                             {"type": "environment", "radiance": [0.1, 0.2, 0.3]}])
+    lights = scene.lights
+    receiver = np.array([[0.0], [-0.5], [0.0]], dtype=np.float32)
+    n = 100_000
+    s = lights.sample(np.repeat(receiver, n, axis=1), np.random.default_rng(2).random((3, n)), RGBColours, "uniform")
+    point = np.isclose(s.distance, 1.0) & s.delta
+    np.testing.assert_allclose(s.value[:, point], 2.0)                 # I / d^2, d = 1
+    np.testing.assert_allclose(s.wi[:, point].T, [[0, 1, 0]] * point.sum(), atol=1e-6)
+    spot = np.isclose(s.distance, 1.4) & s.delta
+    np.testing.assert_allclose(s.value[:, spot], 5.0 / 1.4 ** 2, rtol=1e-5)  # on axis: full intensity
+    directional = s.delta & np.isinf(s.distance)
+    np.testing.assert_allclose(s.value[:, directional].T, [[1, 2, 3]] * directional.sum())
+    env = ~s.delta & np.isinf(s.distance)
+    np.testing.assert_allclose(s.pdf[env], 1 / 6 / (4 * np.pi))          # uniform selection among 6 lights
+    assert abs(point.mean() - 1 / 6) < 0.01 and abs(env.mean() - 1 / 6) < 0.01
+    # Spot falloff: zero beyond the cone, smoothstep inside.
+    spot_light = lights.spots[0]
+    dirs = np.array([[0, -1, 0], [np.sin(np.radians(25)), -np.cos(np.radians(25)), 0],
+                     [np.sin(np.radians(31)), -np.cos(np.radians(31)), 0]]).T
+    falloff = spot_light.falloff(dirs)
+    assert falloff[0] == 1.0 and 0 < falloff[1] < 1 and falloff[2] == 0.0

@@ -26,9 +26,14 @@ def test_furnace_matches_analytic_radiance(albedo):
     np.testing.assert_allclose(result.image.mean(axis=(0, 1)), exact, rtol=6 * error / exact)
 
 
-@pytest.mark.parametrize("params", [{"light_sampling": "nee"}, {"light_sampling": "none"},
+# NEE alone (and uniform MIS, which gives NEE half the weight) is left out here: in a furnace, light
+# samples on the wall next to the receiver make its variance infinite at the cube's edges
+# (G = cos cos / d^2), so its error bars are meaningless.  The Cornell box tests cover them.
+@pytest.mark.parametrize("params", [{"light_sampling": "none"}, {"light_sampling": "mixture"},
                                    {"mis": "balance"}, {"rr": "off", "max_depth": 400},
-                                   {"rr": "fixed", "rr_depth": 2, "rr_probability": 0.3}, {"rr": "albedo"}])
+                                   {"rr": "fixed", "rr_depth": 2, "rr_probability": 0.3}, {"rr": "albedo"},
+                                   {"diffuse_sampling": "uniform"}, {"light_measure": "solid_angle"},
+                                   {"light_selection": "uniform"}])
 def test_furnace_with_other_strategies(params):
     result = ps.render(furnace_scene(0.8), "pt", spp=32, seed=5, **params)
     mean, error = image_mean_and_error(result)

@@ -50,9 +50,9 @@ def test_base_scene_loads():
     scene = load(BASE)
     assert scene.mesh.triangle_count == 4
     assert scene.lights.count == 2
-    np.testing.assert_allclose(scene.lights.area.sum(), 0.16)
+    np.testing.assert_allclose(scene.lights.area.area.sum(), 0.16)
     # The lamp's normal is edge_u x edge_v = (0, 0.4, 0) x (0.4, 0, 0) = -z: it shines down.
-    np.testing.assert_allclose(scene.mesh.normal[:, scene.lights.triangles].T, [[0, 0, -1]] * 2, atol=1e-7)
+    np.testing.assert_allclose(scene.mesh.normal[:, scene.lights.area.triangles].T, [[0, 0, -1]] * 2, atol=1e-7)
     assert scene.camera.resolution == (16, 12)
 
 
@@ -75,7 +75,30 @@ def test_base_scene_loads():
     ({"camera__focal": 1}, r"camera: unknown field\(s\) 'focal'"),
     ({"camera": DELETE}, r"test.toml: camera: required field is missing"),
     ({"materials__grey__reflectance": [0.5, 1.5, 0.5]}, r"materials.grey.reflectance: expected 3 numbers in \[0, 1\]"),
-    ({"materials__grey__type": "plastic"}, r"materials.grey.type: expected one of 'diffuse', got 'plastic'"),
+    ({"materials__grey__type": "plastic"}, r"materials.grey.type: expected one of 'diffuse', 'phong', .*, got "
+                                           r"'plastic'"),
+    ({"materials__grey": {"type": "phong", "diffuse": [0.6] * 3, "specular": [0.5] * 3, "exponent": 10}},
+     r"materials.grey.specular: diffuse \+ specular must not exceed 1 per channel"),
+    ({"materials__grey": {"type": "conductor", "eta": [0.2] * 3, "k": [3] * 3, "alpha": 0}},
+     r"materials.grey.alpha: expected a GGX roughness in \[0.0001, 1\], got 0"),
+    ({"materials__grey": {"type": "dielectric", "ior": -1}}, r"materials.grey.ior: expected a number > 0"),
+    ({"lights": [{"type": "point", "position": [0, 0, 1]}]}, r"lights\[0\].intensity: required field is missing"),
+    ({"lights": [{"type": "spot", "position": [0, 0, 1], "look_at": [0, 0, 1], "intensity": [1, 1, 1]}]},
+     r"lights\[0\].look_at: must differ from position"),
+    ({"lights": [{"type": "directional", "direction": [0, 0, 0], "irradiance": [1, 1, 1]}]},
+     r"lights\[0\].direction: must not be the zero vector"),
+    ({"lights": [{"type": "environment", "radiance": [0, 0, 0]}]},
+     r"lights\[0\].radiance: expected at least one positive component"),
+    ({"lights": [{"type": "laser"}]}, r"lights\[0\].type: expected one of 'point', 'spot'"),
+    ({"camera__type": "thinlens"}, r"camera.aperture_radius: required field is missing"),
+    ({"camera__type": "thinlens", "camera__aperture_radius": 0.1, "camera__focus_distance": -2},
+     r"camera.focus_distance: expected a number > 0"),
+    ({"shapes__0": {"type": "sphere", "radius": 1, "subdivisions": 40, "material": "grey"}},
+     r"shapes\[0\].subdivisions: expected an integer >= 0 and <= 8"),
+    ({"camera__resolution": [2 ** 70, 10]}, r"camera.resolution: expected 2 integers >= 1"),
+    ({"camera__fov": 2 ** 1100}, r"camera.fov: expected a number > 0 and < 180"),
+    ({"shapes__0": {"type": "box", "size": [1e39, 1, 1], "material": "grey"}},
+     r"shapes\[0\]: vertex coordinates must be finite and within"),
     ({"shapes": []}, r"shapes: expected a non-empty array of tables"),
     ({"shapes__0__type": "cone"}, r"shapes\[0\] \('floor'\).type: expected one of 'triangles', 'mesh', 'quad'"),
     ({"shapes__0__edge_v": [4, 0, 0]}, r"shapes\[0\] \('floor'\): 2 degenerate \(zero-area\) triangle\(s\)"),

@@ -1,29 +1,40 @@
-"""Cameras: generate primary rays from pixel positions.
+"""Cameras: primary rays, importance, and the projection of world points to the image.
 
 Conventions (those of Mitsuba 3 and pbrt): the camera looks from
 ``position`` toward ``look_at``; image right is ``forward x up`` and image up
-is the projection of ``up``; pixel (0, 0) is the top-left corner of the image;
-raster coordinates run from 0 to width (x, rightwards) and 0 to height (y,
-downwards).  ``fov`` is the full opening angle in degrees along the axis
-named by ``fov_axis``: ``"x"``, ``"y"``, ``"smaller"`` or ``"larger"`` (of the
-two image dimensions).
+is the projection of ``up``; pixel (0, 0) is the top-left corner of the
+image; raster coordinates run from 0 to width (x, rightwards) and 0 to height
+(y, downwards).  ``fov`` is the full opening angle in degrees along the axis
+named by ``fov_axis``: ``"x"``, ``"y"``, ``"smaller"`` or ``"larger"``.
+
+Importance is normalised as in pbrt-v4 (PerspectiveCamera::We): over the
+film, with A the area of the image rectangle at distance 1 from the lens and
+theta the angle to the optical axis,
+
+    We(x_lens, w) = 1 / (A * lens_area * cos^4 theta)          (inside the frustum)
+
+so that it integrates to one over lens area and projected solid angle.  The
+directional density of primary rays through uniformly chosen film points is
+p(w) = 1 / (A cos^3 theta), and their positional density 1 / lens_area.  A
+pinhole has no lens area: its position is a delta (``delta_position``), it
+cannot be hit by rays, and "lens_area" is taken as 1.
 """
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["PinholeCamera"]
+from .vecmath import dot
+
+__all__ = ["PinholeCamera", "ThinLensCamera", "FOV_AXES"]
 
 FOV_AXES = ("x", "y", "smaller", "larger")
 
 
 class PinholeCamera:
-    """A pinhole camera (a delta in position: it cannot be hit by rays).
+    """A pinhole camera.  Invalid parameters raise ValueError naming the parameter."""
 
-    The image it forms is the pixel average of incident radiance (box pixel
-    filter): a primary ray through a uniformly jittered point of a pixel has
-    weight 1.  Invalid parameters raise ValueError naming the parameter.
-    """
+    delta_position = True
+    lens_radius = 0.0
 
     def __init__(self, position, look_at, up, fov: float, width: int, height: int,
                  fov_axis: str = "smaller") -> None:
@@ -51,7 +62,7 @@ class PinholeCamera:
         self.right = right / right_length
         self.image_up = np.cross(self.right, self.forward)
 
-        # Half extents of the image plane at distance 1 along forward.
+        # Half extents of the image rectangle at distance 1 along forward.
         tan_axis = np.tan(np.radians(self.fov) / 2.0)
         aspect = self.width / self.height
         axis = fov_axis
@@ -60,39 +71,173 @@ class PinholeCamera:
         elif axis == "larger":
             axis = "x" if self.width >= self.height else "y"
         self.tan_half = (tan_axis, tan_axis / aspect) if axis == "x" else (tan_axis * aspect, tan_axis)
+        self.image_area = 4.0 * self.tan_half[0] * self.tan_half[1]
 
     def __repr__(self) -> str:
-        return (f"PinholeCamera(position={self.position.tolist()}, look_at={self.look_at.tolist()}, "
+        return (f"{type(self).__name__}(position={self.position.tolist()}, look_at={self.look_at.tolist()}, "
                 f"up={self.up.tolist()}, fov={self.fov:g}, fov_axis={self.fov_axis!r}, "
-                f"resolution={self.width}x{self.height})")
+                f"resolution={self.width}x{self.height}{self._extra_repr()})")
+
+    def _extra_repr(self) -> str:
+        return ""
 
     @property
     def resolution(self) -> tuple[int, int]:
         """(width, height) in pixels."""
-        return (int(self.width), int(self.height))
+        return (self.width, self.height)
 
     @property
     def pixel_count(self) -> int:
         """Number of pixels."""
-        return int(self.width) * int(self.height)
+        return self.width * self.height
 
-    def generate_rays(self, pixels: np.ndarray, jitter: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Primary rays through the points ``pixel + jitter`` of the image.
+    @property
+    def lens_area(self) -> float:
+        """Area of the lens (1 for a pinhole, whose position is a delta)."""
+        return 1.0
 
-        ``pixels`` are flat pixel indices (row-major, y * width + x); ``jitter``
-        a (2, N) array of offsets in [0, 1) within each pixel.  Returns origins
-        (3, N) (a read-only broadcast of the camera position) and unit
-        directions (3, N), both float32.
-        """
+    # -- primary rays -----------------------------------------------------------------------------
+
+    def _film_directions(self, pixels: np.ndarray, jitter: np.ndarray) -> np.ndarray:
+        """Unnormalised directions (3, N) float32 from the lens centre through film points ``pixel + jitter``."""
         px = (pixels % self.width).astype(np.float32) + jitter[0].astype(np.float32)
         py = (pixels // self.width).astype(np.float32) + jitter[1].astype(np.float32)
         sx = (np.float32(2.0 / self.width) * px - np.float32(1.0)) * np.float32(self.tan_half[0])
         sy = (np.float32(1.0) - np.float32(2.0 / self.height) * py) * np.float32(self.tan_half[1])
         f, r, u = (v.astype(np.float32)[:, None] for v in (self.forward, self.right, self.image_up))
-        d = f + r * sx + u * sy
+        return f + r * sx + u * sy
+
+    def generate_rays(self, pixels: np.ndarray, jitter: np.ndarray, lens: np.ndarray | None = None):
+        """Primary rays through the film points ``pixel + jitter`` (jitter (2, N) in [0, 1)).
+
+        ``pixels`` are flat indices (y * width + x).  ``lens`` (2, N) uniforms
+        choose the lens point (ignored by a pinhole).  Returns origins (3, N)
+        and unit directions (3, N), float32; the ray weight We cos / pdf is 1.
+        """
+        d = self._film_directions(pixels, jitter)
         d /= np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
         origins = np.broadcast_to(self.position.astype(np.float32)[:, None], d.shape)
         return origins, d
+
+    # -- importance ------------------------------------------------------------------------------
+
+    def cos_to_axis(self, directions: np.ndarray) -> np.ndarray:
+        """cos theta between unit directions (3, N) leaving the lens and the optical axis, float64."""
+        return dot(self.forward[:, None], directions.astype(np.float64))
+
+    def raster(self, points: np.ndarray, lens_points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Raster coordinates (2, N) float64 of world points seen through lens points, and whether they are on the film.
+
+        For a pinhole ``lens_points`` is ignored.
+        """
+        to_point = points.astype(np.float64) - self.position[:, None]
+        depth = dot(self.forward[:, None], to_point)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sx = dot(self.right[:, None], to_point) / depth / self.tan_half[0]
+            sy = dot(self.image_up[:, None], to_point) / depth / self.tan_half[1]
+        x = (sx + 1.0) * 0.5 * self.width
+        y = (1.0 - sy) * 0.5 * self.height
+        inside = (depth > 0) & (x >= 0) & (x < self.width) & (y >= 0) & (y < self.height)
+        return np.stack((x, y)), inside
+
+    def importance(self, directions: np.ndarray, lens_points: np.ndarray | None = None) -> np.ndarray:
+        """We = 1 / (A lens_area cos^4 theta) for unit directions leaving lens points onto the film, else 0."""
+        cos = self.cos_to_axis(directions)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            value = 1.0 / (self.image_area * self.lens_area * cos ** 4)
+        return np.where(self._on_film(directions, lens_points), value, 0.0)
+
+    def pdf_direction(self, directions: np.ndarray, lens_points: np.ndarray | None = None) -> np.ndarray:
+        """Solid-angle density 1 / (A cos^3 theta) of primary-ray directions (0 off the film)."""
+        cos = self.cos_to_axis(directions)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            value = 1.0 / (self.image_area * cos ** 3)
+        return np.where(self._on_film(directions, lens_points), value, 0.0)
+
+    def _on_film(self, directions: np.ndarray, lens_points: np.ndarray | None) -> np.ndarray:
+        lens = self.position[:, None] if lens_points is None else lens_points.astype(np.float64)
+        return self.raster(lens + directions.astype(np.float64), lens)[1]
+
+    def sample_lens(self, u: np.ndarray) -> np.ndarray:
+        """Points (3, N) float64 on the lens: the pinhole itself."""
+        return np.repeat(self.position[:, None], u.shape[1], axis=1)
+
+    def sample_importance(self, receivers: np.ndarray, u: np.ndarray):
+        """Connect receivers (3, N) to the camera: for light tracing's t = 1 strategy.
+
+        Returns (wi (3, N) unit from receiver to the lens point, We (N,), pdf (N,)
+        of that lens point in solid angle at the receiver (for a pinhole: 1, a
+        delta), lens points (3, N), raster positions (2, N), valid (N,)).
+        """
+        lens = self.sample_lens(u)
+        to_lens = lens - receivers.astype(np.float64)
+        dist2 = dot(to_lens, to_lens)
+        dist = np.sqrt(dist2)
+        wi = to_lens / dist
+        raster, on_film = self.raster(receivers, lens)
+        cos = self.cos_to_axis(-wi)
+        we = self.importance(-wi, lens)
+        if self.delta_position:
+            pdf = np.ones(dist.shape)
+        else:
+            with np.errstate(divide="ignore", invalid="ignore"):
+                pdf = dist2 / (np.abs(cos) * self.lens_area)
+        return wi, we, pdf, lens, raster, on_film & (we > 0)
+
+
+class ThinLensCamera(PinholeCamera):
+    """A thin-lens camera: a disk of radius ``aperture_radius`` focused at ``focus_distance``.
+
+    Points at the focus distance (measured along the optical axis) are sharp.
+    Its lens can be sampled and hit, so its position is not a delta.
+    """
+
+    delta_position = False
+
+    def __init__(self, position, look_at, up, fov: float, width: int, height: int, fov_axis: str = "smaller",
+                 aperture_radius: float = 0.05, focus_distance: float | None = None) -> None:
+        super().__init__(position, look_at, up, fov, width, height, fov_axis)
+        if not (np.isfinite(aperture_radius) and aperture_radius > 0):
+            raise ValueError(f"aperture_radius: expected a number > 0, got {aperture_radius!r}")
+        if focus_distance is None:
+            focus_distance = float(np.linalg.norm(self.look_at - self.position))
+        if not (np.isfinite(focus_distance) and focus_distance > 0):
+            raise ValueError(f"focus_distance: expected a number > 0, got {focus_distance!r}")
+        self.lens_radius = float(aperture_radius)
+        self.focus_distance = float(focus_distance)
+
+    def _extra_repr(self) -> str:
+        return f", aperture_radius={self.lens_radius:g}, focus_distance={self.focus_distance:g}"
+
+    @property
+    def lens_area(self) -> float:
+        return np.pi * self.lens_radius ** 2
+
+    def sample_lens(self, u: np.ndarray) -> np.ndarray:
+        """Points (3, N) float64 uniform on the lens disk (polar mapping)."""
+        r = self.lens_radius * np.sqrt(u[0])
+        phi = 2.0 * np.pi * u[1]
+        return (self.position[:, None] + self.right[:, None] * (r * np.cos(phi))
+                + self.image_up[:, None] * (r * np.sin(phi)))
+
+    def generate_rays(self, pixels: np.ndarray, jitter: np.ndarray, lens: np.ndarray | None = None):
+        """Rays from a uniform lens point toward the in-focus point of ``pixel + jitter``."""
+        d = self._film_directions(pixels, jitter).astype(np.float64)  # forward component 1
+        focus = self.position[:, None] + d * self.focus_distance
+        origins = self.sample_lens(lens)
+        directions = focus - origins
+        directions /= np.sqrt(dot(directions, directions))
+        return origins.astype(np.float32), directions.astype(np.float32)
+
+    def raster(self, points: np.ndarray, lens_points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Raster position of the film point whose rays through ``lens_points`` reach ``points``."""
+        p = points.astype(np.float64)
+        lens = self.position[:, None] if lens_points is None else lens_points.astype(np.float64)
+        d = p - lens
+        with np.errstate(divide="ignore", invalid="ignore"):
+            focus = lens + d * (self.focus_distance / dot(self.forward[:, None], d))
+        raster, inside = super().raster(focus)
+        return raster, inside & (dot(self.forward[:, None], d) > 0)
 
 
 def _vec3(value, name: str) -> np.ndarray:

@@ -69,6 +69,8 @@ class RenderResult:
                 f"{s['threads']} threads)")
         if s["nonfinite"]:
             text += f"; {s['nonfinite']} non-finite samples were dropped"
+        if s["truncated"]:
+            text += f"; {s['truncated']} paths were cut at the safety depth"
         return text
 
 
@@ -127,6 +129,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
         raise ValueError(f"threads: expected an integer >= 1, got {threads!r}")
 
     integrator = make_integrator(estimator, **params)
+    integrator.check(scene)
     _tune_allocator()
     camera = scene.camera
     film = Film(camera.width, camera.height)
@@ -142,16 +145,18 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
 
     def run(item: WorkItem):
         sampler = StreamSampler(seed, item.keys, item.counts)
-        return item, integrator.render_item(scene, item, sampler, threads=1 if threads > 1 else 0)
+        # One worker per core, each tracing its own rays on its own thread.
+        return item, integrator.render_item(scene, item, sampler, threads=1)
 
     bar = _progress_bar(progress, spp, estimator)
     tile, per_item = work_layout(camera.pixel_count, spp, threads)
     last_tile = -(-camera.pixel_count // tile) - 1
-    rays = done_passes = 0
+    rays = done_passes = truncated = 0
 
     def collect(future) -> None:
-        nonlocal rays, done_passes
+        nonlocal rays, done_passes, truncated
         item, result = future.result()
+        truncated += result.truncated
         width = item.pixel_stop - item.pixel_start
         for k in range(len(item.passes)):
             film.add_tile(item.pixel_start, result.values[:, k * width:(k + 1) * width])
@@ -192,6 +197,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
         "rays": rays,
         "rays_per_second": rays / seconds,
         "nonfinite": film.nonfinite,
+        "truncated": truncated,
         "scene": scene.source,
     }
     return RenderResult(image=film.mean(), variance=film.variance(), stats=stats, film=film)

@@ -5,8 +5,10 @@ tile by tile (:meth:`Film.add_tile`) -- and from the sum and the sum of
 squares of n samples reports the mean and the variance of the mean,
 (sum_sq - sum^2 / n) / (n (n - 1)).
 
-Non-finite sample values (NaN, +-Inf) never reach the sums: they are counted
-in ``nonfinite`` and replaced by zero.  Sums are float64 and are added, never
+Non-finite samples (NaN, +-Inf in any channel) never reach the sums: they
+are counted in ``nonfinite`` and left out of their pixel's sample count, so
+the mean of the remaining samples stays unbiased when such failures are rare
+and unrelated to the pixel's value (the count makes them visible either way).  Sums are float64 and are added, never
 averaged, so films of disjoint sample ranges add up exactly (:meth:`merge`).
 """
 from __future__ import annotations
@@ -32,18 +34,15 @@ class Film:
         """Number of pixels."""
         return self.width * self.height
 
-    def _finite(self, values: np.ndarray) -> np.ndarray:
-        bad = ~np.isfinite(values)
-        if bad.any():
-            self.nonfinite += int(bad.any(axis=0).sum())
-            values = np.where(bad.any(axis=0), 0.0, values)
-        return values
-
     def add_tile(self, start: int, values: np.ndarray) -> None:
         """Add one sample to each of the pixels start .. start + N - 1: ``values`` is (channels, N)."""
-        values = self._finite(np.asarray(values, dtype=np.float64))
+        values = np.asarray(values, dtype=np.float64)
         stop = start + values.shape[1]
-        self.count[start:stop] += 1
+        finite = np.isfinite(values).all(axis=0)
+        if not finite.all():
+            self.nonfinite += int((~finite).sum())
+            values = np.where(finite, values, 0.0)
+        self.count[start:stop] += finite
         self.sum[:, start:stop] += values
         self.sum_sq[:, start:stop] += values * values
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["dot", "cross", "norm", "normalize", "orthonormal_basis", "to_world", "to_local", "offset_along"]
+__all__ = ["dot", "cross", "norm", "normalize", "orthonormal_basis", "Frame", "offset_along"]
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -47,14 +47,20 @@ def orthonormal_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return s, t
 
 
-def to_world(local: np.ndarray, s: np.ndarray, t: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """Vectors given in the frames (s, t, n) expressed in world coordinates."""
-    return local[0] * s + local[1] * t + local[2] * n
+class Frame:
+    """Orthonormal frames (s, t, n) around unit normals (3, N), for models defined in local coordinates."""
 
+    def __init__(self, n: np.ndarray) -> None:
+        self.n = n.astype(np.float64)
+        self.s, self.t = orthonormal_basis(self.n)
 
-def to_local(v: np.ndarray, s: np.ndarray, t: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """World vectors expressed in the frames (s, t, n)."""
-    return np.stack((dot(v, s), dot(v, t), dot(v, n)))
+    def to_local(self, v: np.ndarray) -> np.ndarray:
+        """World vectors (3, N) in local coordinates, float64."""
+        return np.stack((dot(v, self.s), dot(v, self.t), dot(v, self.n)))
+
+    def to_world(self, v: np.ndarray) -> np.ndarray:
+        """Local vectors (3, N) in world coordinates, float64."""
+        return v[0] * self.s + v[1] * self.t + v[2] * self.n
 
 
 def offset_along(p: np.ndarray, n: np.ndarray, side: np.ndarray, epsilon: float) -> np.ndarray:

@@ -1,9 +1,9 @@
 """Warps from the unit square to sampling domains, each with its density.
 
-Every ``square_to_X`` has a matching ``square_to_X_pdf`` giving the density of
-its output in the measure named in its docstring.  Inputs are uniform numbers
-in [0, 1) as (2, N) arrays; outputs are (3, N) float32 unit directions, or
-barycentrics.
+Inputs are uniform numbers in [0, 1) as (2, N) arrays; outputs are (3, N)
+float32 unit directions, or barycentrics.  Direction warps have a matching
+``_pdf`` function giving their solid-angle density; the triangle warp is
+uniform in area (density 1 / area).
 """
 from __future__ import annotations
 
@@ -16,6 +16,7 @@ __all__ = [
 ]
 
 INV_PI = 1.0 / np.pi
+INV_TWO_PI = 0.5 / np.pi
 INV_FOUR_PI = 0.25 / np.pi
 
 

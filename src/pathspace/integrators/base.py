@@ -64,3 +64,4 @@ class ItemResult:
 
     values: np.ndarray
     rays: int
+    truncated: int = 0

@@ -17,6 +17,8 @@ import numpy as np
 from .errors import SceneError
 
 _MISSING = object()
+# Integers beyond this are rejected before NumPy sees them (it cannot hold them in 64 bits).
+MAX_INTEGER = 2 ** 53
 
 
 def _show(value: Any) -> str:
@@ -26,6 +28,8 @@ def _show(value: Any) -> str:
 
 class Fields:
     """Reader over one table (a dict) at a given path of a scene file."""
+
+    REQUIRED = _MISSING  # the default that makes a field required
 
     def __init__(self, table: Any, path: str, source: str) -> None:
         self.source = source
@@ -93,12 +97,15 @@ class Fields:
         self._check_number(value, field, low, high, low_open, high_open, what="a number")
         return float(value)
 
-    def integer(self, field: str, default: Any = _MISSING, *, low: int | None = None) -> int:
-        """An integer >= low."""
+    def integer(self, field: str, default: Any = _MISSING, *, low: int | None = None,
+                high: int | None = None) -> int:
+        """An integer within [low, high] (each bound optional)."""
         value = self._get(field, default)
-        if isinstance(value, bool) or not isinstance(value, int) or (low is not None and value < low):
-            bound = f" >= {low}" if low is not None else ""
-            raise self.error(f"expected an integer{bound}, got {_show(value)}", field)
+        if (isinstance(value, bool) or not isinstance(value, int) or (low is not None and value < low)
+                or (high is not None and value > high) or abs(value) > MAX_INTEGER):
+            bound = " and ".join(b for b in (f">= {low}" if low is not None else "",
+                                             f"<= {high}" if high is not None else "") if b)
+            raise self.error(f"expected an integer{' ' + bound if bound else ''}, got {_show(value)}", field)
         return value
 
     def vector(self, field: str, length: int, default: Any = _MISSING, *, low: float | None = None,
@@ -115,6 +122,8 @@ class Fields:
                 raise self.error(expected, field)
             if integer and not isinstance(item, int):
                 raise self.error(expected, field)
+            if isinstance(item, int) and abs(item) > MAX_INTEGER:
+                raise self.error(expected + f" (integers must not exceed {MAX_INTEGER} in magnitude)", field)
             if not math.isfinite(item) or (low is not None and item < low):
                 raise self.error(expected, field)
         return np.array(value, dtype=np.int64 if integer else np.float64)
@@ -128,7 +137,8 @@ class Fields:
             raise self.error(f"{expected}, got {_show(value)}", field)
         for i, row in enumerate(value):
             ok = isinstance(row, (list, tuple)) and len(row) == columns and all(
-                not isinstance(x, bool) and isinstance(x, int if integer else (int, float)) for x in row)
+                not isinstance(x, bool) and isinstance(x, int if integer else (int, float))
+                and (not isinstance(x, int) or abs(x) <= MAX_INTEGER) for x in row)
             if ok and not integer:
                 ok = all(math.isfinite(x) for x in row)
             if not ok:
@@ -144,7 +154,8 @@ class Fields:
                              field=None)
 
     def _check_number(self, value, field, low, high, low_open, high_open, what):
-        ok = not isinstance(value, bool) and isinstance(value, (int, float)) and math.isfinite(value)
+        ok = (not isinstance(value, bool) and isinstance(value, (int, float))
+              and (not isinstance(value, int) or abs(value) <= MAX_INTEGER) and math.isfinite(value))
         if ok and low is not None:
             ok = value > low if low_open else value >= low
         if ok and high is not None:

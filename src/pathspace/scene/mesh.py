@@ -45,7 +45,7 @@ class TriangleMesh:
         p = self.vertices[self.indices]
         e1 = p[:, 1] - p[:, 0]
         e2 = p[:, 2] - p[:, 0]
-        n = np.cross(e1, e2)
+        n = triangle_cross(self.vertices, self.indices)
         double_area = np.linalg.norm(n, axis=1)
         self.area = 0.5 * double_area
         # Rows 0-2: p0, 3-5: e1 = p1 - p0, 6-8: e2 = p2 - p0, 9-11: unit normal; one
@@ -63,12 +63,7 @@ class TriangleMesh:
         """Axis-aligned bounding box (lower, upper corners)."""
         return self.vertices.min(axis=0), self.vertices.max(axis=0)
 
-    def points(self, prim: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> np.ndarray:
-        """Points (1-b1-b2) p0 + b1 p1 + b2 p2 of triangles ``prim`` as (3, N) float32."""
-        rows = np.take(self.table[0:9], prim, axis=1)
-        return rows[0:3] + rows[3:6] * b1.astype(np.float32, copy=False) + rows[6:9] * b2.astype(np.float32, copy=False)
-
     def hit_geometry(self, prim: np.ndarray, b1: np.ndarray, b2: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Points (see :meth:`points`) and unit geometric normals (3, N) float32 of hits on triangles ``prim``."""
+        """Points (1-b1-b2) p0 + b1 p1 + b2 p2 and unit geometric normals, (3, N) float32, on triangles ``prim``."""
         rows = np.take(self.table, prim, axis=1)
         return rows[0:3] + rows[3:6] * b1 + rows[6:9] * b2, rows[9:12]

@@ -7,9 +7,9 @@ from functools import cached_property
 import numpy as np
 
 from ..accel import Accel
+from ..bsdfs import MaterialTable
 from ..camera import PinholeCamera
-from ..lights import AreaLights
-from ..materials import MaterialTable
+from ..lights import LightSet
 from .mesh import TriangleMesh
 
 __all__ = ["Scene", "RAY_OFFSET_RELATIVE"]
@@ -28,10 +28,10 @@ class Scene:
 
     Attributes
     ----------
-    camera : the camera
+    camera : the camera (pinhole or thin lens)
     mesh : all triangles, with material and shape ids
     materials : material table
-    lights : emitting triangles and their sampling pmf
+    lights : area lights (emitting triangles) and the other lights
     shape_names : name of each shape (index = ``mesh.shape``)
     source : the file it was loaded from, if any
     """
@@ -39,7 +39,7 @@ class Scene:
     camera: PinholeCamera
     mesh: TriangleMesh
     materials: MaterialTable
-    lights: AreaLights
+    lights: LightSet
     shape_names: list[str]
     source: str | None = None
 
@@ -52,6 +52,12 @@ class Scene:
     def accel(self) -> Accel:
         """The Embree BVH of the mesh, built on first use (queries choose their thread count)."""
         return Accel(self.mesh.vertices.astype(np.float32), self.mesh.indices)
+
+    @cached_property
+    def emitter_accel(self) -> Accel:
+        """A BVH of the emitting triangles alone; its primitive ids index ``lights.area.triangles``."""
+        triangles = self.mesh.indices[self.lights.area.triangles]
+        return Accel(self.mesh.vertices.astype(np.float32), np.ascontiguousarray(triangles))
 
     def describe(self) -> str:
         """A short human-readable summary."""

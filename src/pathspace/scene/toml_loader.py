@@ -13,9 +13,9 @@ from typing import Any
 import numpy as np
 import trimesh
 
-from ..camera import PinholeCamera
-from ..lights import AreaLights
-from ..materials import Diffuse, MaterialTable
+from ..bsdfs import KINDS, MaterialTable
+from ..camera import FOV_AXES, PinholeCamera, ThinLensCamera
+from ..lights import AreaLights, DirectionalLight, Environment, LightSet, PointLight, SpotLight
 from . import shapes as builtin
 from .errors import SceneError
 from .fields import Fields
@@ -26,11 +26,16 @@ __all__ = ["load_scene", "scene_from_dict", "FORMAT_VERSION"]
 
 FORMAT_VERSION = 1
 SHAPE_TYPES = ("triangles", "mesh", "quad", "box", "sphere")
-MATERIAL_TYPES = ("diffuse",)
-CAMERA_TYPES = ("pinhole",)
+MATERIAL_TYPES = ("diffuse", "phong", "mirror", "dielectric", "conductor")
+CAMERA_TYPES = ("pinhole", "thinlens")
+LIGHT_TYPES = ("point", "spot", "directional", "environment")
 # A triangle is degenerate when |(p1-p0) x (p2-p0)| <= DEGENERATE_RELATIVE * (longest edge)^2,
 # i.e. its vertices are collinear to within float rounding.
 DEGENERATE_RELATIVE = 1e-10
+# An icosphere of 8 subdivisions has 1.3 million triangles; beyond that memory runs out quickly.
+MAX_SUBDIVISIONS = 8
+# Geometry is traced in float32: coordinates must stay well inside its range.
+MAX_COORDINATE = 1e30
 
 
 def load_scene(path: str | os.PathLike) -> Scene:
@@ -61,6 +66,10 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>",
     shape_list = top.raw("shapes", None)
     if not isinstance(shape_list, list) or not shape_list:
         raise top.error("expected a non-empty array of tables ([[shapes]])", "shapes")
+    light_list = top.raw("lights", [])
+    if not isinstance(light_list, list):
+        raise top.error("expected an array of tables ([[lights]])", "lights")
+    other_lights = [_light(Fields(table, f"lights[{i}]", source)) for i, table in enumerate(light_list)]
     top.finish()
 
     base = Path(base_dir) if base_dir is not None else Path.cwd()
@@ -79,10 +88,7 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>",
         emitter = shape.sub("emitter", None)
         radiance = two_sided = None
         if emitter is not None:
-            radiance = emitter.vector("radiance", 3, low=0.0)
-            if not np.any(radiance > 0):
-                raise emitter.error("expected at least one positive component (remove the emitter instead)",
-                                    "radiance")
+            radiance = np.array(_emission(emitter, "radiance"))
             two_sided = emitter.boolean("two_sided", False)
             emitter.finish()
         shape.finish()
@@ -103,46 +109,100 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>",
     mesh = TriangleMesh(np.concatenate(vertices), np.concatenate(indices), np.concatenate(material_ids),
                         np.concatenate(shape_ids))
     if emit_tris:
-        lights = AreaLights(mesh, np.concatenate(emit_tris), np.concatenate(emit_radiance, axis=1),
-                            np.concatenate(emit_two_sided), np.concatenate(emit_light))
+        area = AreaLights(mesh, np.concatenate(emit_tris), np.concatenate(emit_radiance, axis=1),
+                          np.concatenate(emit_two_sided), np.concatenate(emit_light))
     else:
-        lights = AreaLights(mesh, np.zeros(0, np.int64), np.zeros((3, 0)), np.zeros(0, bool), np.zeros(0, np.int64))
+        area = AreaLights(mesh, np.zeros(0, np.int64), np.zeros((3, 0)), np.zeros(0, bool), np.zeros(0, np.int64))
+    lo, hi = mesh.bounds()
+    lights = LightSet(area, other_lights, scene_radius=0.5 * float(np.linalg.norm(hi - lo)))
     return Scene(camera=camera, mesh=mesh, materials=MaterialTable(material_names, materials), lights=lights,
                  shape_names=names, source=source)
 
 
 def _camera(fields: Fields) -> PinholeCamera:
-    fields.string("type", "pinhole", choices=CAMERA_TYPES)
+    kind = fields.string("type", "pinhole", choices=CAMERA_TYPES)
     position = fields.vector("position", 3)
     look_at = fields.vector("look_at", 3)
     up = fields.vector("up", 3, [0.0, 1.0, 0.0])
     fov = fields.number("fov", low=0.0, high=180.0, low_open=True, high_open=True)
-    fov_axis = fields.string("fov_axis", "smaller", choices=("x", "y", "smaller", "larger"))
+    fov_axis = fields.string("fov_axis", "smaller", choices=FOV_AXES)
     width, height = fields.vector("resolution", 2, integer=True, low=1)
+    lens = {}
+    if kind == "thinlens":
+        lens["aperture_radius"] = fields.number("aperture_radius", low=0.0, low_open=True)
+        if fields.has("focus_distance"):
+            lens["focus_distance"] = fields.number("focus_distance", low=0.0, low_open=True)
     fields.finish()
+    if kind == "thinlens":
+        return _built(fields, lambda: ThinLensCamera(position, look_at, up, fov, int(width), int(height),
+                                                     fov_axis=fov_axis, **lens))
+    return _built(fields, lambda: PinholeCamera(position, look_at, up, fov, int(width), int(height), fov_axis=fov_axis))
+
+
+def _colour(fields: Fields, name: str, default=Fields.REQUIRED) -> tuple[float, float, float]:
+    """An RGB triple of finite numbers >= 0 (the material checks its own range)."""
+    return tuple(float(x) for x in fields.vector(name, 3, default, low=0.0))
+
+
+def _built(fields: Fields, make):
+    """``make()``, with a ValueError of the form "field: message" turned into a SceneError naming the field."""
     try:
-        return PinholeCamera(position, look_at, up, fov, int(width), int(height), fov_axis=fov_axis)
+        return make()
     except ValueError as error:
         field, _, message = str(error).partition(": ")
         raise fields.error(message or str(error), field if message else None) from None
 
 
-def _materials(fields: Fields) -> tuple[list[str], list[Diffuse]]:
+def _material(table: Fields):
+    kind = table.string("type", choices=MATERIAL_TYPES)
+    if kind == "diffuse":
+        args = (_colour(table, "reflectance"),)
+    elif kind == "mirror":
+        args = (_colour(table, "reflectance", [1.0, 1.0, 1.0]),)
+    elif kind == "dielectric":
+        args = (table.number("ior", 1.5, low=0.0, low_open=True),)
+    elif kind == "conductor":
+        args = (_colour(table, "eta"), _colour(table, "k"), table.number("alpha"))
+    else:
+        args = (_colour(table, "diffuse"), _colour(table, "specular"), table.number("exponent", low=0.0))
+    table.finish()
+    return _built(table, lambda: KINDS[kind](*args))
+
+
+def _materials(fields: Fields) -> tuple[list[str], list]:
     names, materials = [], []
     for name in fields.table:
-        table = fields.sub(name)
-        kind = table.string("type", choices=MATERIAL_TYPES)
-        if kind == "diffuse":
-            reflectance = table.vector("reflectance", 3, low=0.0)
-            if np.any(reflectance > 1.0):
-                raise table.error(f"expected 3 numbers in [0, 1] (an albedo above 1 creates energy), "
-                                  f"got {reflectance.tolist()}", "reflectance")
-            materials.append(Diffuse(tuple(float(x) for x in reflectance)))
-        table.finish()
+        materials.append(_material(fields.sub(name)))
         names.append(name)
     if not names:
         raise fields.error("expected at least one material", None)
     return names, materials
+
+
+def _light(fields: Fields):
+    kind = fields.string("type", choices=LIGHT_TYPES)
+    if kind == "point":
+        args = (tuple(fields.vector("position", 3)), _emission(fields, "intensity"))
+    elif kind == "spot":
+        cone = fields.number("cone_angle", 30.0, low=0.0, high=90.0, low_open=True)
+        args = (tuple(fields.vector("position", 3)), tuple(fields.vector("look_at", 3)),
+                _emission(fields, "intensity"), cone, fields.number("falloff_start", min(25.0, cone), low=0.0,
+                                                                   high=cone))
+    elif kind == "directional":
+        args = (tuple(fields.vector("direction", 3)), _emission(fields, "irradiance"))
+    else:
+        args = (_emission(fields, "radiance"),)
+    fields.finish()
+    light_types = {"point": PointLight, "spot": SpotLight, "directional": DirectionalLight,
+                   "environment": Environment}
+    return _built(fields, lambda: light_types[kind](*args))
+
+
+def _emission(fields: Fields, name: str) -> tuple[float, float, float]:
+    value = fields.vector(name, 3, low=0.0)
+    if not np.any(value > 0):
+        raise fields.error("expected at least one positive component", name)
+    return tuple(float(x) for x in value)
 
 
 def _shape_geometry(shape: Fields, base: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -164,11 +224,13 @@ def _shape_geometry(shape: Fields, base: Path) -> tuple[np.ndarray, np.ndarray]:
     else:
         v, f = builtin.sphere(shape.vector("center", 3, [0.0, 0.0, 0.0]),
                               shape.number("radius", low=0.0, low_open=True),
-                              shape.integer("subdivisions", 3, low=0))
+                              shape.integer("subdivisions", 3, low=0, high=MAX_SUBDIVISIONS))
     transform = shape.sub("transform", None)
+    mirrored = False
     if transform is not None:
-        v = _apply_transform(transform, v)
-    if shape.boolean("flip_normals", False):
+        v, mirrored = _apply_transform(transform, v)
+    # A mirroring transform reverses the winding; undo that so normals keep facing the same way.
+    if shape.boolean("flip_normals", False) != mirrored:
         f = f[:, ::-1]
     return v, _check_triangles(shape, v, f, shape.boolean("drop_degenerate", False))
 
@@ -188,6 +250,8 @@ def _mesh_file(shape: Fields, base: Path) -> tuple[np.ndarray, np.ndarray]:
         raise shape.error(f"mesh file {path} contains no triangles", "file")
     if not np.all(np.isfinite(v)):
         raise shape.error(f"mesh file {path} has non-finite vertex coordinates", "file")
+    if f.ndim != 2 or f.shape[1] != 3 or f.min() < 0 or f.max() >= len(v):
+        raise shape.error(f"mesh file {path} has faces referring to vertices outside 0..{len(v) - 1}", "file")
     return v, f
 
 
@@ -210,12 +274,13 @@ def _apply_transform(fields: Fields, v: np.ndarray) -> np.ndarray:
     translate = fields.vector("translate", 3, [0.0, 0.0, 0.0])
     fields.finish()
     matrix = builtin.transform_matrix(scale, axis, angle, translate)
-    return v @ matrix[:3, :3].T + matrix[:3, 3]
+    return v @ matrix[:3, :3].T + matrix[:3, 3], bool(np.linalg.det(matrix[:3, :3]) < 0)
 
 
 def _check_triangles(shape: Fields, v: np.ndarray, f: np.ndarray, drop_degenerate: bool) -> np.ndarray:
-    if not np.all(np.isfinite(v)):
-        raise shape.error("vertex coordinates must be finite", None)
+    if not np.all(np.isfinite(v)) or np.abs(v).max() > MAX_COORDINATE:
+        raise shape.error(f"vertex coordinates must be finite and within +-{MAX_COORDINATE:g} (float32 geometry)",
+                          None)
     cross = np.linalg.norm(triangle_cross(v, f), axis=1)
     p = v[f]
     longest2 = np.max([np.sum((p[:, a] - p[:, b]) ** 2, axis=1) for a, b in ((0, 1), (1, 2), (2, 0))], axis=0)

@@ -1,0 +1,118 @@
+"""Scattering models and the material table of a scene.
+
+Models: :class:`Diffuse` (Lambertian), :class:`Phong` (modified Phong,
+energy-conserving), :class:`Mirror` (delta), :class:`Dielectric` (smooth
+glass, delta), :class:`Conductor` (rough GGX metal).  See
+:mod:`pathspace.bsdfs.base` for the interface they share.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .base import MODES, BSDFSample
+from .conductor import Conductor
+from .diffuse import SAMPLING as DIFFUSE_SAMPLING
+from .diffuse import Diffuse
+from .dielectric import Dielectric
+from .mirror import Mirror
+from .phong import Phong
+
+__all__ = ["BSDFSample", "Conductor", "DIFFUSE_SAMPLING", "Dielectric", "Diffuse", "KINDS", "MODES",
+           "MaterialLanes", "MaterialTable", "Mirror", "Phong"]
+
+KINDS = {model.kind: model for model in (Diffuse, Phong, Mirror, Dielectric, Conductor)}
+
+
+class MaterialTable:
+    """The materials of a scene, grouped by kind, with per-kind parameter tables.
+
+    Attributes
+    ----------
+    names : material names, in id order
+    materials : the material descriptions (dataclasses of :data:`KINDS`)
+    kinds : the model classes present, in first-use order
+    kind_of : (M,) int32, position in ``kinds`` of each material's model
+    local_id : (M,) int32, index of each material within its kind's tables
+    tables : per kind, the parameter tables of its materials
+    delta : (M,) bool, whether a material only has delta lobes
+    """
+
+    def __init__(self, names: list[str], materials: list) -> None:
+        if len(names) != len(materials):
+            raise ValueError("one name per material is required")
+        self.names = list(names)
+        self.materials = list(materials)
+        self.kinds: list = []
+        members: list[list] = []
+        self.kind_of = np.zeros(len(materials), dtype=np.int32)
+        self.local_id = np.zeros(len(materials), dtype=np.int32)
+        for i, material in enumerate(materials):
+            model = type(material)
+            if model not in self.kinds:
+                self.kinds.append(model)
+                members.append([])
+            k = self.kinds.index(model)
+            self.kind_of[i] = k
+            self.local_id[i] = len(members[k])
+            members[k].append(material)
+        self.tables = [model.tables(group) for model, group in zip(self.kinds, members)]
+        self.delta = np.array([type(m).delta for m in materials], dtype=bool)
+
+    def __len__(self) -> int:
+        return len(self.materials)
+
+    def __repr__(self) -> str:
+        return "MaterialTable(" + ", ".join(f"{n}={m}" for n, m in zip(self.names, self.materials)) + ")"
+
+    def gather(self, kind: int, material_ids: np.ndarray, colours, options):
+        """Per-lane parameters of model ``kinds[kind]`` for lanes using ``material_ids`` (all of that kind)."""
+        return self.kinds[kind].gather(self.tables[kind], self.local_id.take(material_ids), colours, options)
+
+
+class MaterialLanes:
+    """The materials of a wavefront's lanes, grouped by kind, parameters gathered once.
+
+    ``eval`` and ``sample`` run each kind's functions on its lanes and
+    assemble full-width results; with a single kind in the scene no lanes
+    are moved at all.
+    """
+
+    def __init__(self, table: MaterialTable, material_ids: np.ndarray, colours, options: dict) -> None:
+        self.count = int(material_ids.size)
+        self.channels = colours.channels
+        if len(table.kinds) == 1:
+            self.groups = [(table.kinds[0], None, table.gather(0, material_ids, colours, options))]
+        else:
+            kind = table.kind_of.take(material_ids)
+            self.groups = []
+            for k in range(len(table.kinds)):
+                idx = np.flatnonzero(kind == k)
+                if idx.size:
+                    self.groups.append((table.kinds[k], idx, table.gather(k, material_ids.take(idx), colours, options)))
+        self.delta = table.delta.take(material_ids) if table.delta.any() else None
+
+    def eval(self, normal: np.ndarray, wo: np.ndarray, wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """f |cos| (C, N) and pdf (N,) of every lane's material (zero for delta materials)."""
+        if self.groups[0][1] is None:
+            model, _, params = self.groups[0]
+            return model.eval(params, normal, wo, wi)
+        f_cos, pdf = np.zeros((self.channels, self.count)), np.zeros(self.count)
+        for model, idx, params in self.groups:
+            f_cos[:, idx], pdf[idx] = model.eval(params, _lanes(normal, idx), _lanes(wo, idx), _lanes(wi, idx))
+        return f_cos, pdf
+
+    def sample(self, normal: np.ndarray, wo: np.ndarray, u: np.ndarray, mode: str = "radiance") -> BSDFSample:
+        """One sampled direction per lane from its material."""
+        if self.groups[0][1] is None:
+            model, _, params = self.groups[0]
+            return model.sample(params, normal, wo, u, mode)
+        out = BSDFSample(np.zeros((3, self.count), dtype=np.float32), np.zeros((self.channels, self.count)),
+                         np.zeros(self.count), np.zeros(self.count, dtype=bool))
+        for model, idx, params in self.groups:
+            s = model.sample(params, _lanes(normal, idx), _lanes(wo, idx), u[:, idx], mode)
+            out.wi[:, idx], out.weight[:, idx], out.pdf[idx], out.delta[idx] = s.wi, s.weight, s.pdf, s.delta
+        return out
+
+
+def _lanes(values: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    return np.take(values, idx, axis=-1)

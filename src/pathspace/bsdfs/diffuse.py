@@ -1,0 +1,86 @@
+"""Lambertian reflection: f = albedo / pi, two-sided.
+
+Sampling techniques (estimator option ``diffuse_sampling``): ``"cosine"``
+(density cos(theta)/pi; the sample weight is the albedo) or ``"uniform"``
+over the hemisphere (density 1/(2 pi); weight 2 albedo cos(theta)).  Both
+are built without a tangent frame: n + a uniform point on the unit sphere,
+normalised, is cosine-distributed about n (Archimedes' hat-box theorem);
+a uniform sphere point flipped to n's side is uniform on the hemisphere.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import warp
+from .base import BSDFSample, face_forward
+
+__all__ = ["Diffuse", "SAMPLING"]
+
+SAMPLING = ("cosine", "uniform")
+
+
+@dataclass
+class DiffuseParams:
+    albedo: np.ndarray      # (C, N)
+    technique: str
+
+
+@dataclass(frozen=True)
+class Diffuse:
+    """Lambertian reflector with RGB albedo ``reflectance`` in [0, 1]."""
+
+    reflectance: tuple[float, float, float]
+    kind = "diffuse"
+    delta = False
+
+    def __post_init__(self) -> None:
+        r = np.asarray(self.reflectance, dtype=np.float64)
+        if r.shape != (3,) or not np.all(np.isfinite(r)) or np.any(r < 0) or np.any(r > 1):
+            raise ValueError(f"reflectance: expected 3 numbers in [0, 1], got {self.reflectance!r}")
+
+    @staticmethod
+    def tables(materials: list["Diffuse"]) -> dict[str, np.ndarray]:
+        """Parameter tables over the given materials."""
+        return {"reflectance": np.array([m.reflectance for m in materials], dtype=np.float64).T.copy()}
+
+    @staticmethod
+    def gather(tables, ids: np.ndarray, colours, options) -> DiffuseParams:
+        """Per-lane parameters."""
+        return DiffuseParams(colours.lookup(tables["reflectance"], ids), options.get("diffuse_sampling", "cosine"))
+
+    @staticmethod
+    def cos_pdf(params: DiffuseParams, cos_i: np.ndarray) -> np.ndarray:
+        """Solid-angle pdf of the sampling technique at cos_i = dot(n, wi) on the side of wo."""
+        if params.technique == "uniform":
+            return np.where(cos_i > 0, warp.INV_TWO_PI, 0.0)
+        return np.maximum(cos_i, 0).astype(np.float64) * warp.INV_PI
+
+    @staticmethod
+    def eval(params: DiffuseParams, n, wo, wi) -> tuple[np.ndarray, np.ndarray]:
+        """(f |cos theta_i|, pdf)."""
+        n_f, _ = face_forward(n, wo)
+        cos_i = n_f[0] * wi[0] + n_f[1] * wi[1] + n_f[2] * wi[2]
+        cos_over_pi = np.maximum(cos_i, 0).astype(np.float64) * warp.INV_PI
+        return params.albedo * cos_over_pi, Diffuse.cos_pdf(params, cos_i)
+
+    @staticmethod
+    def sample(params: DiffuseParams, n, wo, u, mode="radiance") -> BSDFSample:
+        """A direction by the chosen technique."""
+        n_f, _ = face_forward(n, wo)
+        sphere = warp.square_to_uniform_sphere(u[1:3])
+        if params.technique == "uniform":
+            side = np.copysign(np.float32(1), n_f[0] * sphere[0] + n_f[1] * sphere[1] + n_f[2] * sphere[2])
+            wi = sphere * side
+            cos_i = np.abs(n_f[0] * wi[0] + n_f[1] * wi[1] + n_f[2] * wi[2]).astype(np.float64)
+            weight = params.albedo * (2.0 * cos_i)
+            pdf = np.full(cos_i.shape, warp.INV_TWO_PI)
+        else:
+            wi = n_f + sphere
+            length = np.sqrt(wi[0] * wi[0] + wi[1] * wi[1] + wi[2] * wi[2])
+            # The sum vanishes only when the sphere point is exactly -n (probability 0).
+            wi = np.where(length > 1e-6, wi / np.maximum(length, np.float32(1e-6)), n_f)
+            pdf = np.maximum(n_f[0] * wi[0] + n_f[1] * wi[1] + n_f[2] * wi[2], 0).astype(np.float64) * warp.INV_PI
+            weight = params.albedo
+        return BSDFSample(wi, weight, pdf, np.zeros(pdf.shape, dtype=bool))

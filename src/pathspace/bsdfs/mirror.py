@@ -1,0 +1,52 @@
+"""Perfect mirror: a delta reflection with RGB reflectance, two-sided.
+
+It is never evaluated for a given pair of directions (f is a Dirac delta):
+``eval`` returns zero, and estimators cannot connect through it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .base import BSDFSample, face_forward, reflect
+
+__all__ = ["Mirror"]
+
+
+@dataclass
+class MirrorParams:
+    reflectance: np.ndarray  # (C, N)
+
+
+@dataclass(frozen=True)
+class Mirror:
+    """Delta mirror with RGB ``reflectance`` in [0, 1]."""
+
+    reflectance: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    kind = "mirror"
+    delta = True
+
+    def __post_init__(self) -> None:
+        r = np.asarray(self.reflectance, dtype=np.float64)
+        if r.shape != (3,) or not np.all(np.isfinite(r)) or np.any(r < 0) or np.any(r > 1):
+            raise ValueError(f"reflectance: expected 3 numbers in [0, 1], got {self.reflectance!r}")
+
+    @staticmethod
+    def tables(materials: list["Mirror"]) -> dict[str, np.ndarray]:
+        return {"reflectance": np.array([m.reflectance for m in materials], dtype=np.float64).T.copy()}
+
+    @staticmethod
+    def gather(tables, ids, colours, options) -> MirrorParams:
+        return MirrorParams(colours.lookup(tables["reflectance"], ids))
+
+    @staticmethod
+    def eval(params: MirrorParams, n, wo, wi) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros_like(params.reflectance), np.zeros(wo.shape[1])
+
+    @staticmethod
+    def sample(params: MirrorParams, n, wo, u, mode="radiance") -> BSDFSample:
+        n_f, cos_o = face_forward(n, wo)
+        wi = reflect(wo, n_f, cos_o)
+        count = wo.shape[1]
+        return BSDFSample(wi.astype(np.float32), params.reflectance, np.ones(count), np.ones(count, dtype=bool))

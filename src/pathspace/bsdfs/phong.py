@@ -1,0 +1,112 @@
+"""Modified Phong: an energy-conserving diffuse + glossy lobe (Lafortune & Willems 1994), two-sided.
+
+f(wo, wi) = kd / pi + ks (e + 2) / (2 pi) cos^e(alpha),  alpha = angle(wi, mirror(wo)),
+with kd + ks <= 1 per channel so that the albedo never exceeds one.  Sampling
+picks the glossy lobe with probability mean(ks) / (mean(kd) + mean(ks)) and
+otherwise the cosine-weighted diffuse lobe; the glossy lobe samples cos^e
+about the mirror direction (density (e + 1) / (2 pi) cos^e).  Directions
+below the surface are failed samples.  The pdf of a direction is the
+mixture of both lobe densities (as in SmallVCM's Phong).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import warp
+from ..vecmath import Frame
+from .base import BSDFSample, face_forward, reflect
+
+__all__ = ["Phong"]
+
+
+@dataclass
+class PhongParams:
+    kd: np.ndarray           # (C, N)
+    ks: np.ndarray           # (C, N)
+    exponent: np.ndarray     # (N,)
+    glossy_prob: np.ndarray  # (N,)
+
+
+@dataclass(frozen=True)
+class Phong:
+    """Diffuse ``diffuse`` plus glossy ``specular`` (RGB, sum <= 1 per channel) with Phong ``exponent``."""
+
+    diffuse: tuple[float, float, float]
+    specular: tuple[float, float, float]
+    exponent: float
+    kind = "phong"
+    delta = False
+
+    def __post_init__(self) -> None:
+        kd = np.asarray(self.diffuse, dtype=np.float64)
+        ks = np.asarray(self.specular, dtype=np.float64)
+        for name, v in (("diffuse", kd), ("specular", ks)):
+            if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(v < 0):
+                raise ValueError(f"{name}: expected 3 numbers >= 0, got {v.tolist()}")
+        if np.any(kd + ks > 1.0 + 1e-12):
+            raise ValueError(f"specular: diffuse + specular must not exceed 1 per channel (energy conservation), "
+                             f"got {(kd + ks).tolist()}")
+        if not (np.isfinite(self.exponent) and self.exponent >= 0):
+            raise ValueError(f"exponent: expected a number >= 0, got {self.exponent!r}")
+
+    @staticmethod
+    def tables(materials: list["Phong"]) -> dict[str, np.ndarray]:
+        kd = np.array([m.diffuse for m in materials], dtype=np.float64).T.copy()
+        ks = np.array([m.specular for m in materials], dtype=np.float64).T.copy()
+        total = kd.mean(axis=0) + ks.mean(axis=0)
+        glossy = np.divide(ks.mean(axis=0), total, out=np.zeros_like(total), where=total > 0)
+        return {"kd": kd, "ks": ks, "exponent": np.array([m.exponent for m in materials], dtype=np.float64),
+                "glossy_prob": glossy}
+
+    @staticmethod
+    def gather(tables, ids, colours, options) -> PhongParams:
+        return PhongParams(colours.lookup(tables["kd"], ids), colours.lookup(tables["ks"], ids),
+                           tables["exponent"].take(ids), tables["glossy_prob"].take(ids))
+
+    @staticmethod
+    def _lobes(params: PhongParams, n_f, wo, cos_o, wi):
+        """(cos theta_i, cos^e(alpha) term, lobe pdf) for world directions."""
+        cos_i = (n_f[0] * wi[0] + n_f[1] * wi[1] + n_f[2] * wi[2]).astype(np.float64)
+        r = reflect(wo.astype(np.float64), n_f.astype(np.float64), cos_o.astype(np.float64))
+        cos_a = np.clip(r[0] * wi[0] + r[1] * wi[1] + r[2] * wi[2], 0.0, 1.0)
+        e = params.exponent
+        power = cos_a ** e
+        glossy_pdf = (e + 1.0) * warp.INV_TWO_PI * power
+        diffuse_pdf = np.maximum(cos_i, 0.0) * warp.INV_PI
+        pdf = params.glossy_prob * glossy_pdf + (1.0 - params.glossy_prob) * diffuse_pdf
+        return cos_i, power, np.where(cos_i > 0, pdf, 0.0)
+
+    @staticmethod
+    def _f_cos(params: PhongParams, cos_i, power):
+        lobe = (params.exponent + 2.0) * warp.INV_TWO_PI * power
+        positive = np.maximum(cos_i, 0.0)
+        return (params.kd * warp.INV_PI + params.ks * lobe) * positive
+
+    @staticmethod
+    def eval(params: PhongParams, n, wo, wi) -> tuple[np.ndarray, np.ndarray]:
+        n_f, cos_o = face_forward(n, wo)
+        cos_i, power, pdf = Phong._lobes(params, n_f, wo, cos_o, wi)
+        return Phong._f_cos(params, cos_i, power), pdf
+
+    @staticmethod
+    def sample(params: PhongParams, n, wo, u, mode="radiance") -> BSDFSample:
+        n_f, cos_o = face_forward(n, wo)
+        glossy = u[0] < params.glossy_prob
+        # Glossy lobe: cos alpha = u^(1 / (e + 1)) about the mirror direction.
+        r = reflect(wo.astype(np.float64), n_f.astype(np.float64), cos_o.astype(np.float64))
+        cos_a = u[1] ** (1.0 / (params.exponent + 1.0))
+        sin_a = np.sqrt(np.maximum(0.0, 1.0 - cos_a * cos_a))
+        phi = 2.0 * np.pi * u[2]
+        lobe = Frame(r).to_world(np.stack((sin_a * np.cos(phi), sin_a * np.sin(phi), cos_a)))
+        # Diffuse lobe: cosine-weighted about the normal.
+        sphere = warp.square_to_uniform_sphere(u[1:3]).astype(np.float64)
+        cosine = n_f + sphere
+        cosine /= np.maximum(np.sqrt(cosine[0] ** 2 + cosine[1] ** 2 + cosine[2] ** 2), 1e-12)
+        wi = np.where(glossy, lobe, cosine).astype(np.float32)
+        cos_i, power, pdf = Phong._lobes(params, n_f, wo, cos_o, wi)
+        f_cos = Phong._f_cos(params, cos_i, power)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            weight = np.where(pdf > 0, f_cos / pdf, 0.0)
+        return BSDFSample(wi, weight, pdf, np.zeros(pdf.shape, dtype=bool))

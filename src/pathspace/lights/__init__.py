@@ -1,0 +1,218 @@
+"""The lights of a scene and next-event estimation's sampling of them.
+
+A :class:`LightSet` holds the scene's area lights (emitting triangles),
+point, spot and directional lights and an optional constant environment.
+Sampling first picks an *entity* -- one emitting triangle, or one other
+light -- from a discrete pmf, by power ("power": emitted power; triangles of
+an area light in proportion to their power) or uniformly over lights
+("uniform": every light equally likely, triangles of an area light by area),
+then samples a point or direction on it.
+
+Densities are in solid angle at the receiver and include the selection pmf;
+for delta lights (point, spot, directional) the "pdf" is the pmf alone and
+the sample is flagged ``delta``.
+"""
+from __future__ import annotations
+
+from functools import cached_property
+
+import numpy as np
+
+from ..vecmath import dot
+from .. import warp
+from .area import MEASURES, AreaLights
+from .delta import DirectionalLight, PointLight, SpotLight
+from .environment import Environment
+
+__all__ = ["AreaLights", "DirectionalLight", "Environment", "LightSample", "LightSet", "MEASURES", "PointLight",
+           "SELECTIONS", "SpotLight"]
+
+SELECTIONS = ("power", "uniform")
+AREA, POINT, SPOT, DIRECTIONAL, ENVIRONMENT = range(5)
+
+
+class LightSample:
+    """One light sample per receiver (N lanes)."""
+
+    __slots__ = ("wi", "distance", "point", "normal", "value", "pdf", "delta", "cos_light")
+
+    def __init__(self, wi, distance, point, normal, value, pdf, delta, cos_light):
+        self.wi = wi                # (3, N) float32 unit, receiver -> light
+        self.distance = distance    # (N,) float32; inf for directional and environment samples
+        self.point = point          # (3, N) float32 point on the light (finite lights)
+        self.normal = normal        # (3, N) float32 light surface normal (area lights; else zero)
+        self.value = value          # (C, N) float64: radiance, or I / d^2, or irradiance (see module doc)
+        self.pdf = pdf              # (N,) float64 solid-angle pdf times the selection pmf; pmf alone if delta
+        self.delta = delta          # (N,) bool
+        self.cos_light = cos_light  # (N,) float32 dot(normal, -wi) for area lights; 1 otherwise
+
+
+class LightSet:
+    """All lights of a scene; see the module docstring."""
+
+    def __init__(self, area: AreaLights, others: list, scene_radius: float) -> None:
+        self.area = area
+        self.points = [light for light in others if isinstance(light, PointLight)]
+        self.spots = [light for light in others if isinstance(light, SpotLight)]
+        self.directionals = [light for light in others if isinstance(light, DirectionalLight)]
+        environments = [light for light in others if isinstance(light, Environment)]
+        if len(environments) > 1:
+            raise ValueError("at most one environment light is supported")
+        self.environment = environments[0] if environments else None
+        self.scene_radius = float(scene_radius)
+        kinds = [np.full(area.count, AREA)]
+        index = [np.arange(area.count)]
+        power = [area.power]
+        for kind, group in ((POINT, self.points), (SPOT, self.spots), (DIRECTIONAL, self.directionals)):
+            kinds.append(np.full(len(group), kind))
+            index.append(np.arange(len(group)))
+            power.append(np.array([l.power if kind != DIRECTIONAL else l.power(self.scene_radius) for l in group]))
+        if self.environment is not None:
+            kinds.append(np.array([ENVIRONMENT]))
+            index.append(np.array([0]))
+            power.append(np.array([self.environment.power(self.scene_radius)]))
+        self.kind = np.concatenate(kinds).astype(np.int64)
+        self.index = np.concatenate(index).astype(np.int64)
+        self.power = np.concatenate(power).astype(np.float64)
+        # Light id of every entity: area triangles share their shape's id.
+        others_ids = area.light_count + np.arange(self.kind.size - area.count)
+        _, area_ids = np.unique(area.light_of, return_inverse=True)
+        self.light_id = np.concatenate([area_ids.ravel(), others_ids]).astype(np.int64)
+        self.point_position = np.array([l.position for l in self.points], dtype=np.float64).reshape(-1, 3).T
+        self.point_intensity = np.array([l.intensity for l in self.points], dtype=np.float64).reshape(-1, 3).T
+        self.spot_intensity = np.array([l.intensity for l in self.spots], dtype=np.float64).reshape(-1, 3).T
+        self.directional_irradiance = np.array([l.irradiance for l in self.directionals],
+                                               dtype=np.float64).reshape(-1, 3).T
+
+    @property
+    def count(self) -> int:
+        """Number of sampling entities (emitting triangles count one each)."""
+        return int(self.kind.size)
+
+    @property
+    def has_delta(self) -> bool:
+        """Whether some light cannot be hit by rays."""
+        return bool(self.points or self.spots or self.directionals)
+
+    def __repr__(self) -> str:
+        parts = [f"{self.area.count} emitting triangles in {self.area.light_count} area lights"]
+        for name, group in (("point", self.points), ("spot", self.spots), ("directional", self.directionals)):
+            if group:
+                parts.append(f"{len(group)} {name}")
+        if self.environment is not None:
+            parts.append("a constant environment")
+        return f"LightSet({', '.join(parts)}; total power {self.power.sum():.6g} W)"
+
+    @cached_property
+    def _pmfs(self) -> dict[str, np.ndarray]:
+        pmfs = {}
+        if self.count == 0:
+            return {s: np.zeros(0) for s in SELECTIONS}
+        pmfs["power"] = self.power / self.power.sum()
+        weight = np.ones(self.count)
+        weight[: self.area.count] = self.area.area  # by area within a light
+        per_light = np.bincount(self.light_id, weights=weight)
+        pmfs["uniform"] = weight / per_light[self.light_id] / per_light.size
+        return pmfs
+
+    def pmf(self, selection: str) -> np.ndarray:
+        """Selection probability of every entity."""
+        if selection not in SELECTIONS:
+            raise ValueError(f"light selection: expected one of {SELECTIONS}, got {selection!r}")
+        return self._pmfs[selection]
+
+    @cached_property
+    def _cdfs(self) -> dict[str, np.ndarray]:
+        cdfs = {}
+        for selection in SELECTIONS:
+            cdf = np.cumsum(self.pmf(selection))
+            cdfs[selection] = cdf / cdf[-1] if cdf.size else cdf
+        return cdfs
+
+    def sample(self, receivers: np.ndarray, u: np.ndarray, colours, selection: str = "power",
+               measure: str = "area") -> LightSample:
+        """One light sample per receiver point (3, N) from uniforms u (3, N)."""
+        count = receivers.shape[1]
+        entity = np.minimum(np.searchsorted(self._cdfs[selection], u[0], side="right"), self.count - 1)
+        pmf = self.pmf(selection).take(entity)
+        kind = self.kind.take(entity)
+        if self.count == self.area.count:  # only area lights: no dispatch
+            return self._sample_area(self.index.take(entity), receivers, u[1:3], pmf, colours, measure)
+        wi = np.zeros((3, count), dtype=np.float32)
+        distance = np.full(count, np.inf, dtype=np.float32)
+        point = np.zeros((3, count), dtype=np.float32)
+        normal = np.zeros((3, count), dtype=np.float32)
+        value = np.zeros((colours.channels, count))
+        pdf = np.zeros(count)
+        delta = np.zeros(count, dtype=bool)
+        cos_light = np.ones(count, dtype=np.float32)
+        for k in np.unique(kind):
+            lanes = np.flatnonzero(kind == k)
+            idx, ref, uu = self.index.take(entity.take(lanes)), np.take(receivers, lanes, axis=1), u[1:3, lanes]
+            if k == AREA:
+                s = self._sample_area(idx, ref, uu, pmf.take(lanes), colours, measure)
+                wi[:, lanes], distance[lanes], point[:, lanes], normal[:, lanes] = s.wi, s.distance, s.point, s.normal
+                value[:, lanes], pdf[lanes], cos_light[lanes] = s.value, s.pdf, s.cos_light
+                continue
+            if k == ENVIRONMENT:
+                d = warp.square_to_uniform_sphere(uu)
+                wi[:, lanes] = d
+                value[:, lanes] = colours.lookup_unbounded(np.asarray(self.environment.radiance)[:, None],
+                                                           np.zeros(lanes.size, dtype=np.int64))
+                pdf[lanes] = pmf.take(lanes) * warp.INV_FOUR_PI
+                continue
+            delta[lanes] = True
+            pdf[lanes] = pmf.take(lanes)
+            if k == DIRECTIONAL:
+                travel = np.array([l.unit_direction for l in self.directionals]).T.take(idx, axis=1)
+                wi[:, lanes] = -travel
+                value[:, lanes] = colours.lookup_unbounded(self.directional_irradiance, idx)
+                continue
+            lights = self.points if k == POINT else self.spots
+            position = np.array([l.position for l in lights], dtype=np.float64).T.take(idx, axis=1)
+            to_light = position - ref
+            dist2 = dot(to_light, to_light)
+            dist = np.sqrt(dist2)
+            direction = to_light / dist
+            intensity = (self.point_intensity if k == POINT else self.spot_intensity)
+            falloff = np.ones(lanes.size)
+            if k == SPOT:
+                for j in np.unique(idx):
+                    mine = idx == j
+                    falloff[mine] = self.spots[j].falloff(-direction[:, mine])
+            wi[:, lanes] = direction
+            distance[lanes] = dist
+            point[:, lanes] = position
+            value[:, lanes] = colours.lookup_unbounded(intensity, idx) * (falloff / dist2)
+        return LightSample(wi, distance, point, normal, value, pdf, delta, cos_light)
+
+    def _sample_area(self, emitter, receivers, u, pmf, colours, measure) -> LightSample:
+        point, normal, wi, distance, cos_light, pdf = self.area.sample(emitter, receivers, u, measure)
+        value = self.area.emitted(emitter, cos_light, colours)
+        return LightSample(wi, distance, point, normal, value, pdf * pmf, np.zeros(pmf.shape, dtype=bool), cos_light)
+
+    def pdf_hit(self, triangles: np.ndarray, receivers: np.ndarray, points: np.ndarray, selection: str = "power",
+                measure: str = "area") -> np.ndarray:
+        """Density (solid angle, with the pmf) with which :meth:`sample` produces ``points`` on ``triangles``.
+
+        ``receivers`` are the points the samples would be taken from.
+        Triangles that do not emit get density 0.
+        """
+        emitter = self.area.emitter_of_triangle.take(triangles)
+        emits = emitter >= 0
+        safe = np.where(emits, emitter, 0)
+        pmf = self.pmf(selection)[: self.area.count].take(safe)
+        return np.where(emits, pmf * self.area.pdf_sa(safe, receivers, points, measure), 0.0)
+
+    def pdf_environment(self, selection: str = "power") -> float:
+        """Density (solid angle, with the pmf) of sampling any given direction of the environment."""
+        if self.environment is None:
+            return 0.0
+        return float(self.pmf(selection)[-1]) * warp.INV_FOUR_PI
+
+    def environment_radiance(self, count: int, colours) -> np.ndarray:
+        """Radiance (C, count) of the environment (zero if there is none)."""
+        if self.environment is None:
+            return np.zeros((colours.channels, count))
+        return colours.lookup_unbounded(np.asarray(self.environment.radiance, dtype=np.float64)[:, None],
+                                        np.zeros(count, dtype=np.int64))

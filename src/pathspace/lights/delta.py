@@ -1,0 +1,108 @@
+"""Lights with a delta distribution: point and spot lights (delta in position), directional lights
+(delta in direction).  No ray can hit them, so only light sampling reaches them; they take no part
+in MIS.  Their ``value`` at a receiver is the irradiance-like factor that multiplies f |cos| / pmf:
+
+    point:        I / d^2
+    spot:         I smoothstep(cos_total, cos_falloff_start, cos theta) / d^2   (pbrt-v4's falloff)
+    directional:  E (irradiance on a surface facing the light)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["PointLight", "SpotLight", "DirectionalLight"]
+
+
+def _vec3(value, name: str, positive: bool = False) -> np.ndarray:
+    v = np.asarray(value, dtype=np.float64)
+    if v.shape != (3,) or not np.all(np.isfinite(v)) or (positive and (np.any(v < 0) or not np.any(v > 0))):
+        expected = "3 finite numbers >= 0, at least one > 0" if positive else "3 finite numbers"
+        raise ValueError(f"{name}: expected {expected}, got {value!r}")
+    return v
+
+
+@dataclass(frozen=True)
+class PointLight:
+    """Isotropic point light at ``position`` with RGB radiant intensity ``intensity`` (W/sr)."""
+
+    position: tuple[float, float, float]
+    intensity: tuple[float, float, float]
+    kind = "point"
+
+    def __post_init__(self) -> None:
+        _vec3(self.position, "position")
+        _vec3(self.intensity, "intensity", positive=True)
+
+    @property
+    def power(self) -> float:
+        return 4.0 * np.pi * float(np.mean(self.intensity))
+
+    def falloff(self, direction_from_light: np.ndarray) -> np.ndarray:
+        return np.ones(direction_from_light.shape[1])
+
+
+@dataclass(frozen=True)
+class SpotLight:
+    """Point light emitting toward ``look_at`` within ``cone_angle`` degrees of its axis.
+
+    Full intensity within ``falloff_start`` degrees, smoothly falling to zero at
+    ``cone_angle`` (pbrt-v4's smoothstep falloff).
+    """
+
+    position: tuple[float, float, float]
+    look_at: tuple[float, float, float]
+    intensity: tuple[float, float, float]
+    cone_angle: float = 30.0
+    falloff_start: float = 25.0
+    kind = "spot"
+
+    def __post_init__(self) -> None:
+        p = _vec3(self.position, "position")
+        if np.linalg.norm(_vec3(self.look_at, "look_at") - p) == 0:
+            raise ValueError("look_at: must differ from position")
+        _vec3(self.intensity, "intensity", positive=True)
+        if not (0 < self.cone_angle <= 90 and 0 <= self.falloff_start <= self.cone_angle):
+            raise ValueError(f"cone_angle, falloff_start: expected 0 < falloff_start <= cone_angle <= 90 degrees, "
+                             f"got {self.falloff_start}, {self.cone_angle}")
+
+    @property
+    def axis(self) -> np.ndarray:
+        d = np.asarray(self.look_at, dtype=np.float64) - np.asarray(self.position, dtype=np.float64)
+        return d / np.linalg.norm(d)
+
+    @property
+    def power(self) -> float:
+        cos_start, cos_end = np.cos(np.radians(self.falloff_start)), np.cos(np.radians(self.cone_angle))
+        return float(np.mean(self.intensity)) * 2.0 * np.pi * ((1.0 - cos_start) + (cos_start - cos_end) / 2.0)
+
+    def falloff(self, direction_from_light: np.ndarray) -> np.ndarray:
+        cos = self.axis @ direction_from_light
+        cos_start, cos_end = np.cos(np.radians(self.falloff_start)), np.cos(np.radians(self.cone_angle))
+        if cos_start <= cos_end:
+            return (cos >= cos_end).astype(np.float64)
+        x = np.clip((cos - cos_end) / (cos_start - cos_end), 0.0, 1.0)
+        return x * x * (3.0 - 2.0 * x)
+
+
+@dataclass(frozen=True)
+class DirectionalLight:
+    """Light arriving from infinitely far along ``direction`` (the way it travels) with irradiance ``irradiance``."""
+
+    direction: tuple[float, float, float]
+    irradiance: tuple[float, float, float]
+    kind = "directional"
+
+    def __post_init__(self) -> None:
+        if np.linalg.norm(_vec3(self.direction, "direction")) == 0:
+            raise ValueError("direction: must not be the zero vector")
+        _vec3(self.irradiance, "irradiance", positive=True)
+
+    @property
+    def unit_direction(self) -> np.ndarray:
+        d = np.asarray(self.direction, dtype=np.float64)
+        return d / np.linalg.norm(d)
+
+    def power(self, scene_radius: float) -> float:
+        return np.pi * scene_radius ** 2 * float(np.mean(self.irradiance))
