@@ -59,7 +59,7 @@ def test_light_sampling_integrates_the_subtended_solid_angle(measure):
         n = 400_000
         s = lights.sample(np.repeat(point[:, None].astype(np.float32), n, axis=1),
                           np.random.default_rng(1).random((3, n)), RGBColours, "power", measure)
-        emitting = s.value[0] > 0
+        emitting = s.facing & (s.value[0] > 0)
         estimate = np.where(emitting, 1.0 / s.pdf, 0.0)
         mean, error = estimate.mean(), estimate.std() / np.sqrt(n)
         exact = 0.0

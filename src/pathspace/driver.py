@@ -1,19 +1,19 @@
 """The render driver: cut a render into work items, run them on threads, fill a film.
 
 A render of ``spp`` samples per pixel is ``spp`` passes over the image.  Work
-items hold about ``TILE_PIXELS`` paths: a tile of a large image, or several
-passes of a small one (:func:`work_layout`); each (pass, tile) unit has its
-own random stream (see :mod:`pathspace.sampler`).  Items run on a pool of
-worker threads -- NumPy and Embree release the GIL in their inner loops --
-and their results are added to the film in item order, so the same seed
-gives the bit-identical image whatever the thread count.
+items hold at most about ``TILE_PIXELS`` paths: a tile of a large image, or
+several passes of a small one (:func:`work_layout`); each (pass, tile) unit
+has its own random stream (see :mod:`pathspace.sampler`).  One worker thread
+per core runs the estimator over a wavefront that takes items as it needs
+them -- NumPy and Embree release the GIL in their inner loops -- and results
+are added to the film in item order, so the same seed gives the
+bit-identical image whatever the thread count.
 """
 from __future__ import annotations
 
 import os
 import time as _time
-from collections import deque
-from concurrent.futures import ThreadPoolExecutor
+import threading
 from dataclasses import dataclass, field
 from typing import Any, Iterator
 
@@ -22,7 +22,6 @@ import numpy as np
 from . import _native
 from .film import Film
 from .integrators import WorkItem, make_integrator, work_layout
-from .sampler import StreamSampler
 from .scene import Scene, load_scene
 
 __all__ = ["render", "RenderResult"]
@@ -75,20 +74,24 @@ class RenderResult:
 
 
 def _work_items(pixel_count: int, passes: Iterator[int], tile: int, per_item: int) -> Iterator[WorkItem]:
-    """Work items over the given passes, in order; see :func:`work_layout`."""
+    """Work items over the given passes, numbered in order; see :func:`work_layout`."""
+    index = 0
+    for group in _groups(passes, per_item):
+        for start in range(0, pixel_count, tile):
+            yield WorkItem(index, range(group[0], group[-1] + 1), start // tile, start, min(start + tile, pixel_count))
+            index += 1
+
+
+def _groups(passes: Iterator[int], size: int) -> Iterator[list[int]]:
+    """Consecutive groups of ``size`` passes (the last may be shorter)."""
     group: list[int] = []
     for p in passes:
         group.append(p)
-        if len(group) == per_item:
-            yield from _tiles(group, tile, pixel_count)
+        if len(group) == size:
+            yield group
             group = []
     if group:
-        yield from _tiles(group, tile, pixel_count)
-
-
-def _tiles(group: list[int], tile: int, pixel_count: int) -> Iterator[WorkItem]:
-    for k, start in enumerate(range(0, pixel_count, tile)):
-        yield WorkItem(range(group[0], group[-1] + 1), k, start, min(start + tile, pixel_count))
+        yield group
 
 
 def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int | None = None,
@@ -143,42 +146,66 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
             yield first_pass + p
             p += 1
 
-    def run(item: WorkItem):
-        sampler = StreamSampler(seed, item.keys, item.counts)
-        # One worker per core, each tracing its own rays on its own thread.
-        return item, integrator.render_item(scene, item, sampler, threads=1)
-
-    bar = _progress_bar(progress, spp, estimator)
     tile, per_item = work_layout(camera.pixel_count, spp, threads)
     last_tile = -(-camera.pixel_count // tile) - 1
-    rays = done_passes = truncated = 0
+    items = _work_items(camera.pixel_count, passes(), tile, per_item)
+    lock = threading.Lock()
 
-    def collect(future) -> None:
-        nonlocal rays, done_passes, truncated
-        item, result = future.result()
-        truncated += result.truncated
+    def next_item() -> WorkItem | None:
+        with lock:
+            return None if failures else next(items, None)
+
+    # Each worker runs the estimator on its own wavefront, taking items as it needs them; results are added
+    # to the film in item order, pass by pass, so the sums come out the same whatever the thread count.
+    done = threading.Condition()
+    results: dict[int, tuple[WorkItem, np.ndarray]] = {}
+    failures: list[BaseException] = []
+    counters = [{"rays": 0, "truncated": 0} for _ in range(threads)]
+    running = [threads]
+
+    def work(k: int) -> None:
+        try:
+            for item, values in integrator.render_stream(scene, next_item, seed, counters[k]):
+                with done:
+                    results[item.index] = (item, values)
+                    done.notify()
+        except BaseException as error:  # handed to the main thread
+            failures.append(error)
+        finally:
+            with done:
+                running[0] -= 1
+                done.notify()
+
+    bar = _progress_bar(progress, spp, estimator)
+    workers = [threading.Thread(target=work, args=(k,), daemon=True) for k in range(threads)]
+    for w in workers:
+        w.start()
+    done_passes = expected = 0
+    while True:
+        with done:
+            while expected not in results and running[0] and not failures:
+                done.wait()
+            if failures:
+                break
+            if expected not in results:
+                break
+            item, values = results.pop(expected)
+        expected += 1
         width = item.pixel_stop - item.pixel_start
         for k in range(len(item.passes)):
-            film.add_tile(item.pixel_start, result.values[:, k * width:(k + 1) * width])
-        rays += result.rays
+            film.add_tile(item.pixel_start, values[:, k * width:(k + 1) * width])
         if item.tile == last_tile:
             done_passes += len(item.passes)
             if bar is not None:
                 bar.update(len(item.passes))
-
-    # Results are collected in submission order and added pass by pass, so the
-    # film sums in the same order whatever the thread count or the grouping of
-    # passes into items; at most 2 * threads items are in flight.
-    with ThreadPoolExecutor(max_workers=threads) as pool:
-        pending: deque = deque()
-        for item in _work_items(camera.pixel_count, passes(), tile, per_item):
-            pending.append(pool.submit(run, item))
-            while len(pending) > 2 * threads:
-                collect(pending.popleft())
-        while pending:
-            collect(pending.popleft())
+    for w in workers:
+        w.join()
     if bar is not None:
         bar.close()
+    if failures:
+        raise failures[0]
+    rays = sum(c["rays"] for c in counters)
+    truncated = sum(c["truncated"] for c in counters)
     seconds = _time.perf_counter() - start
     samples = int(film.count.sum())
     stats = {

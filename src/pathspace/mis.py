@@ -24,10 +24,13 @@ def mis_weight(pdf_a: np.ndarray, pdf_b: np.ndarray, heuristic: str = "power", b
     b = np.asarray(pdf_b, dtype=np.float64)
     with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
         if heuristic == "uniform":
-            ratio = (b > 0).astype(np.float64)
+            ratio = np.where(a > 0, (b > 0).astype(np.float64), np.inf)
         else:
             ratio = b / a  # 0/x -> 0, x/0 -> inf, inf/inf -> nan
             if heuristic == "power":
                 ratio = ratio * ratio if beta == 2.0 else ratio ** beta
-        weight = np.where(a > 0, 1.0 / (1.0 + ratio), 0.0)
-    return np.where(np.isnan(weight), 0.5, weight)
+        weight = np.asarray(1.0 / (1.0 + ratio))  # a = 0 < b: ratio inf, weight 0
+    undefined = np.isnan(weight)  # 0/0: neither applies (0); inf/inf: two delta strategies (1/2 each)
+    if undefined.any():
+        weight = np.where(undefined, np.where(np.isinf(a), 0.5, 0.0), weight)
+    return weight

@@ -58,16 +58,19 @@ class RussianRoulette:
                 "throughput": f"survival probability = max throughput, capped at {self.cap:g}"}[self.policy]
         return f"Russian roulette from depth {self.start_depth}: {rule}"
 
-    def survival(self, depth: int, throughput: np.ndarray, albedo: np.ndarray) -> np.ndarray | None:
+    def survival(self, depth: np.ndarray, throughput: np.ndarray, albedo: np.ndarray) -> np.ndarray | None:
         """Survival probabilities (N,) of paths whose next segment would be ``depth + 1``, or None (all survive).
 
-        ``throughput`` (C, N) is the path throughput including this vertex's
-        sample weight, ``albedo`` (C, N) that sample weight.
+        ``depth`` (N,) counts each path's segments so far, ``throughput`` (C, N)
+        is the path throughput including this vertex's sample weight, ``albedo``
+        (C, N) that sample weight.
         """
-        if self.policy == "off" or depth < self.start_depth:
+        if self.policy == "off" or depth.max(initial=0) < self.start_depth:
             return None
         if self.policy == "fixed":
-            return np.full(throughput.shape[1], 1.0 - self.probability)
-        if self.policy == "albedo":
-            return np.clip(albedo.max(axis=0), 0.0, 1.0)
-        return np.clip(throughput.max(axis=0), 0.0, self.cap)
+            q = np.full(throughput.shape[1], 1.0 - self.probability)
+        elif self.policy == "albedo":
+            q = np.clip(albedo.max(axis=0), 0.0, 1.0)
+        else:
+            q = np.clip(throughput.max(axis=0), 0.0, self.cap)
+        return np.where(depth >= self.start_depth, q, 1.0)

@@ -4,14 +4,16 @@ A render is cut into *units* -- one tile of pixels in one pass -- and every
 unit draws from its own ``numpy.random.Generator``, seeded by
 ``SeedSequence(seed, spawn_key=key)`` (the stream ``SeedSequence(seed).spawn``
 hands out) with a key that names the unit, never the thread, process or
-wavefront that runs it.  So the same seed gives the same image on one core,
-on two, or split across machines, and a render of n passes is a prefix of
-one with more.
+wavefront that runs it.  A unit's lanes draw together, a row of numbers per
+dimension, so the numbers a path receives depend only on its unit: the same
+seed gives the same image on one core or two, split across machines, and
+whatever else shares the wavefront.
 
 Estimators ask a sampler for ``draw(k)``: k uniform numbers in [0, 1) per live
-lane, as a (k, lanes) float64 array, and tell it ``keep(indices)`` when lanes
-terminate.  The protocol lets a Markov-chain sampler (primary-sample-space
-MLT) replay given numbers instead.
+lane, as a (k, lanes) float64 array; tell it ``keep(indices)`` when lanes
+terminate; and ``add(keys, counts, k)`` when new units join the wavefront
+(their lanes go last, and get their first k numbers).  The protocol lets a
+Markov-chain sampler (primary-sample-space MLT) replay given numbers instead.
 """
 from __future__ import annotations
 
@@ -29,31 +31,45 @@ def unit_generator(seed: int, key: tuple[int, ...]) -> np.random.Generator:
 
 
 class StreamSampler:
-    """Fresh independent uniforms for a wavefront made of consecutive units.
+    """Fresh independent uniforms for a wavefront of lanes grouped in units (lanes ordered unit by unit)."""
 
-    ``counts[j]`` lanes belong to unit ``keys[j]``; lanes are ordered unit by
-    unit, and stay so as lanes terminate, so each unit's lanes draw from its
-    own stream whatever else shares the wavefront.
-    """
-
-    def __init__(self, seed: int, keys: Sequence[tuple[int, ...]], counts: Sequence[int]) -> None:
-        if len(keys) != len(counts):
-            raise ValueError("one lane count per unit is required")
-        self.generators = [unit_generator(seed, key) for key in keys]
-        self.counts = np.asarray(counts, dtype=np.int64)
-        self.unit = np.repeat(np.arange(len(keys)), self.counts)
+    def __init__(self, seed: int, keys: Sequence[tuple[int, ...]] = (), counts: Sequence[int] = ()) -> None:
+        self.seed = int(seed)
+        self.generators: list[np.random.Generator] = []
+        self.unit = np.zeros(0, dtype=np.int64)
+        self.counts = np.zeros(0, dtype=np.int64)
+        if len(keys):
+            self.add(keys, counts, 0)
 
     @property
     def lanes(self) -> int:
         """Number of live lanes."""
         return int(self.unit.size)
 
+    def add(self, keys: Sequence[tuple[int, ...]], counts: Sequence[int], k: int) -> np.ndarray:
+        """Append lanes of new units (``counts[j]`` lanes of unit ``keys[j]``); return their first k numbers."""
+        if len(keys) != len(counts):
+            raise ValueError("one lane count per unit is required")
+        first = len(self.generators)
+        new = [unit_generator(self.seed, key) for key in keys]
+        draws = [g.random((k, int(c))) for g, c in zip(new, counts)]
+        self.generators += new
+        self.counts = np.concatenate([self.counts, np.asarray(counts, dtype=np.int64)])
+        self.unit = np.concatenate([self.unit, np.repeat(np.arange(first, first + len(keys)), counts)])
+        return np.concatenate(draws, axis=1) if draws else np.empty((k, 0))
+
     def draw(self, k: int) -> np.ndarray:
         """k uniform numbers in [0, 1) for every live lane, shape (k, lanes)."""
-        if len(self.generators) == 1:
-            return self.generators[0].random((k, self.lanes))
-        parts = [g.random((k, int(c))) for g, c in zip(self.generators, self.counts) if c]
-        return np.concatenate(parts, axis=1) if parts else np.empty((k, 0))
+        live = np.flatnonzero(self.counts)
+        if live.size == 1:
+            return self.generators[live[0]].random((k, self.lanes))
+        out = np.empty((k, self.lanes))
+        start = 0
+        for j in live:
+            stop = start + int(self.counts[j])
+            out[:, start:stop] = self.generators[j].random((k, stop - start))
+            start = stop
+        return out
 
     def keep(self, indices: np.ndarray) -> None:
         """Only the lanes at ``indices`` (increasing, of the current live lanes) stay alive."""

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import MODES, BSDFSample
+from .base import MODES, BSDFSample, Surface
 from .conductor import Conductor
 from .diffuse import SAMPLING as DIFFUSE_SAMPLING
 from .diffuse import Diffuse
@@ -18,7 +18,7 @@ from .mirror import Mirror
 from .phong import Phong
 
 __all__ = ["BSDFSample", "Conductor", "DIFFUSE_SAMPLING", "Dielectric", "Diffuse", "KINDS", "MODES",
-           "MaterialLanes", "MaterialTable", "Mirror", "Phong"]
+           "MaterialLanes", "MaterialTable", "Mirror", "Phong", "Surface"]
 
 KINDS = {model.kind: model for model in (Diffuse, Phong, Mirror, Dielectric, Conductor)}
 
@@ -35,6 +35,7 @@ class MaterialTable:
     local_id : (M,) int32, index of each material within its kind's tables
     tables : per kind, the parameter tables of its materials
     delta : (M,) bool, whether a material only has delta lobes
+    transmissive : whether some material can send light through the surface
     """
 
     def __init__(self, names: list[str], materials: list) -> None:
@@ -57,6 +58,7 @@ class MaterialTable:
             members[k].append(material)
         self.tables = [model.tables(group) for model, group in zip(self.kinds, members)]
         self.delta = np.array([type(m).delta for m in materials], dtype=bool)
+        self.transmissive = any(isinstance(m, Dielectric) for m in materials)
 
     def __len__(self) -> int:
         return len(self.materials)
@@ -91,28 +93,24 @@ class MaterialLanes:
                     self.groups.append((table.kinds[k], idx, table.gather(k, material_ids.take(idx), colours, options)))
         self.delta = table.delta.take(material_ids) if table.delta.any() else None
 
-    def eval(self, normal: np.ndarray, wo: np.ndarray, wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def eval(self, surface: Surface, wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """f |cos| (C, N) and pdf (N,) of every lane's material (zero for delta materials)."""
         if self.groups[0][1] is None:
             model, _, params = self.groups[0]
-            return model.eval(params, normal, wo, wi)
+            return model.eval(params, surface, wi)
         f_cos, pdf = np.zeros((self.channels, self.count)), np.zeros(self.count)
         for model, idx, params in self.groups:
-            f_cos[:, idx], pdf[idx] = model.eval(params, _lanes(normal, idx), _lanes(wo, idx), _lanes(wi, idx))
+            f_cos[:, idx], pdf[idx] = model.eval(params, surface.take(idx), np.take(wi, idx, axis=1))
         return f_cos, pdf
 
-    def sample(self, normal: np.ndarray, wo: np.ndarray, u: np.ndarray, mode: str = "radiance") -> BSDFSample:
+    def sample(self, surface: Surface, u: np.ndarray, mode: str = "radiance") -> BSDFSample:
         """One sampled direction per lane from its material."""
         if self.groups[0][1] is None:
             model, _, params = self.groups[0]
-            return model.sample(params, normal, wo, u, mode)
+            return model.sample(params, surface, u, mode)
         out = BSDFSample(np.zeros((3, self.count), dtype=np.float32), np.zeros((self.channels, self.count)),
                          np.zeros(self.count), np.zeros(self.count, dtype=bool))
         for model, idx, params in self.groups:
-            s = model.sample(params, _lanes(normal, idx), _lanes(wo, idx), u[:, idx], mode)
+            s = model.sample(params, surface.take(idx), u[:, idx], mode)
             out.wi[:, idx], out.weight[:, idx], out.pdf[idx], out.delta[idx] = s.wi, s.weight, s.pdf, s.delta
         return out
-
-
-def _lanes(values: np.ndarray, idx: np.ndarray) -> np.ndarray:
-    return np.take(values, idx, axis=-1)

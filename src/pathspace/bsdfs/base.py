@@ -9,25 +9,28 @@ plus vectorised class methods that work on lanes that all use that kind:
     turns (3, M) RGB tables into per-lane (C, N) values (RGB: C = 3; spectral
     rendering evaluates spectra at the lanes' wavelengths); ``options`` are
     estimator settings the model reads (``diffuse_sampling``).
-``eval(params, n, wo, wi)``
+``eval(params, surface, wi)``
     (f(wo, wi) |cos theta_i| as (C, N) float64, pdf of sampling wi given wo in
     solid angle as (N,) float64).  Delta models return zeros.
-``sample(params, n, wo, u, mode)``
+``sample(params, surface, u, mode)``
     A :class:`BSDFSample` from three uniforms per lane.
 
-Geometry: ``n`` is the unit geometric normal (3, N) float32 as stored (its
-side set by the triangle's winding), ``wo`` and ``wi`` unit directions away
-from the surface.  Models that do not transmit are two-sided: they act on
-the side of ``wo``.  ``mode`` is "radiance" for paths traced from the camera
-and "importance" for paths traced from lights (only refraction differs).
+Geometry comes as a :class:`Surface`: the unit normal turned to the side of
+the outgoing direction ``wo`` (directions point away from the surface), and
+whether that is the side the geometric normal points to (``outside``; it
+tells a dielectric whether light enters or leaves).  Models that do not
+transmit are two-sided: they act on the side of ``wo``.  ``mode`` is
+"radiance" for paths traced from the camera and "importance" for paths
+traced from lights (only refraction differs).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
-__all__ = ["BSDFSample", "MODES", "face_forward", "reflect"]
+__all__ = ["BSDFSample", "MODES", "Surface", "reflect"]
 
 MODES = ("radiance", "importance")
 
@@ -49,11 +52,34 @@ class BSDFSample:
     delta: np.ndarray
 
 
-def face_forward(n: np.ndarray, w: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The normal turned to the side of w, and dot(n, w) as seen from that side (>= 0)."""
-    cos = n[0] * w[0] + n[1] * w[1] + n[2] * w[2]
-    sign = np.copysign(np.float32(1), cos)
-    return n * sign, np.abs(cos)
+class Surface:
+    """Shading geometry of N lanes seen along rays of direction ``direction`` (3, N) float32.
+
+    ``n`` (3, N) float32 unit normal with dot(n, wo) >= 0, where ``wo`` =
+    -direction (computed when first used); ``cos_o`` (N,) = dot(n, wo);
+    ``outside`` (N,) bool: wo is on the side the geometric normal points to.
+    """
+
+    def __init__(self, n: np.ndarray, direction: np.ndarray, cos_o: np.ndarray, outside: np.ndarray) -> None:
+        self.n, self.direction, self.cos_o, self.outside = n, direction, cos_o, outside
+
+    @classmethod
+    def facing(cls, normal: np.ndarray, direction: np.ndarray, cos: np.ndarray | None = None) -> "Surface":
+        """The surface hit by rays ``direction``, given its geometric normal (and dot(normal, -direction))."""
+        if cos is None:
+            cos = -(normal[0] * direction[0] + normal[1] * direction[1] + normal[2] * direction[2])
+        outside = cos >= 0
+        return cls(normal * np.where(outside, np.float32(1), np.float32(-1)), direction, np.abs(cos), outside)
+
+    @cached_property
+    def wo(self) -> np.ndarray:
+        """Unit directions toward where the rays came from (3, N) float32."""
+        return -self.direction
+
+    def take(self, idx: np.ndarray) -> "Surface":
+        """The lanes ``idx``."""
+        return Surface(np.take(self.n, idx, axis=1), np.take(self.direction, idx, axis=1), self.cos_o.take(idx),
+                       self.outside.take(idx))
 
 
 def reflect(w: np.ndarray, n: np.ndarray, cos: np.ndarray) -> np.ndarray:

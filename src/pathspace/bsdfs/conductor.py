@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..vecmath import Frame
-from .base import BSDFSample, face_forward
+from .base import BSDFSample, Surface
 from .fresnel import fresnel_conductor
 from .microfacet import ggx_d, sample_visible_normal, smith_g1, smith_g2, visible_normal_pdf
 
@@ -61,14 +61,9 @@ class Conductor:
                                tables["alpha"].take(ids))
 
     @staticmethod
-    def _local(n, wo, wi=None):
-        n_f, _ = face_forward(n, wo)
-        frame = Frame(n_f)
-        return frame, frame.to_local(wo), (frame.to_local(wi) if wi is not None else None)
-
-    @staticmethod
-    def eval(params: ConductorParams, n, wo, wi) -> tuple[np.ndarray, np.ndarray]:
-        _, lo, li = Conductor._local(n, wo, wi)
+    def eval(params: ConductorParams, surface: Surface, wi) -> tuple[np.ndarray, np.ndarray]:
+        frame = Frame(surface.n)
+        lo, li = frame.to_local(surface.wo), frame.to_local(wi)
         h = lo + li
         length = np.sqrt(h[0] ** 2 + h[1] ** 2 + h[2] ** 2)
         valid = (lo[2] > 0) & (li[2] > 0) & (length > 0)
@@ -83,8 +78,9 @@ class Conductor:
         return f_fresnel * scalar, np.nan_to_num(pdf)
 
     @staticmethod
-    def sample(params: ConductorParams, n, wo, u, mode="radiance") -> BSDFSample:
-        frame, lo, _ = Conductor._local(n, wo)
+    def sample(params: ConductorParams, surface: Surface, u, mode="radiance") -> BSDFSample:
+        frame = Frame(surface.n)
+        lo = frame.to_local(surface.wo)
         alpha = params.alpha
         h = sample_visible_normal(lo, alpha, u[1:3])
         cos_oh = lo[0] * h[0] + lo[1] * h[1] + lo[2] * h[2]

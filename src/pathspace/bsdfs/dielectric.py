@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import BSDFSample
+from .base import BSDFSample, Surface
 from .fresnel import fresnel_dielectric
 
 __all__ = ["Dielectric"]
@@ -47,17 +47,15 @@ class Dielectric:
         return DielectricParams(tables["ior"].take(ids), colours.channels)
 
     @staticmethod
-    def eval(params: DielectricParams, n, wo, wi) -> tuple[np.ndarray, np.ndarray]:
-        return np.zeros((params.channels, wo.shape[1])), np.zeros(wo.shape[1])
+    def eval(params: DielectricParams, surface: Surface, wi) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros((params.channels, wi.shape[1])), np.zeros(wi.shape[1])
 
     @staticmethod
-    def sample(params: DielectricParams, n, wo, u, mode="radiance") -> BSDFSample:
-        cos_o = (n[0] * wo[0] + n[1] * wo[1] + n[2] * wo[2]).astype(np.float64)
-        entering = cos_o > 0
-        eta = np.where(entering, params.ior, 1.0 / params.ior)  # eta_t / eta_i
-        side = np.where(entering, 1.0, -1.0)
-        n_f = n.astype(np.float64) * side                         # normal on the side of wo
-        cos_i = np.abs(cos_o)
+    def sample(params: DielectricParams, surface: Surface, u, mode="radiance") -> BSDFSample:
+        eta = np.where(surface.outside, params.ior, 1.0 / params.ior)  # eta_t / eta_i: entering from outside
+        n_f = surface.n.astype(np.float64)                            # normal on the side of wo
+        cos_i = surface.cos_o.astype(np.float64)
+        wo = surface.wo
         fresnel, cos_t = fresnel_dielectric(cos_i, eta)
         reflects = u[0] < fresnel
         w = wo.astype(np.float64)
@@ -68,6 +66,6 @@ class Dielectric:
         pdf = np.where(reflects, fresnel, 1.0 - fresnel)
         scale = np.ones_like(eta) if mode == "importance" else 1.0 / (eta * eta)
         weight = np.where(reflects, 1.0, scale)
-        count = wo.shape[1]
+        count = wi.shape[1]
         return BSDFSample(wi.astype(np.float32), np.broadcast_to(weight, (params.channels, count)).copy(), pdf,
                           np.ones(count, dtype=bool))

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import warp
-from .base import BSDFSample, face_forward
+from .base import BSDFSample, Surface
 
 __all__ = ["Diffuse", "SAMPLING"]
 
@@ -58,17 +58,18 @@ class Diffuse:
         return np.maximum(cos_i, 0).astype(np.float64) * warp.INV_PI
 
     @staticmethod
-    def eval(params: DiffuseParams, n, wo, wi) -> tuple[np.ndarray, np.ndarray]:
+    def eval(params: DiffuseParams, surface: Surface, wi) -> tuple[np.ndarray, np.ndarray]:
         """(f |cos theta_i|, pdf)."""
-        n_f, _ = face_forward(n, wo)
+        n_f = surface.n
         cos_i = n_f[0] * wi[0] + n_f[1] * wi[1] + n_f[2] * wi[2]
         cos_over_pi = np.maximum(cos_i, 0).astype(np.float64) * warp.INV_PI
-        return params.albedo * cos_over_pi, Diffuse.cos_pdf(params, cos_i)
+        pdf = cos_over_pi if params.technique == "cosine" else Diffuse.cos_pdf(params, cos_i)
+        return params.albedo * cos_over_pi, pdf
 
     @staticmethod
-    def sample(params: DiffuseParams, n, wo, u, mode="radiance") -> BSDFSample:
+    def sample(params: DiffuseParams, surface: Surface, u, mode="radiance") -> BSDFSample:
         """A direction by the chosen technique."""
-        n_f, _ = face_forward(n, wo)
+        n_f = surface.n
         sphere = warp.square_to_uniform_sphere(u[1:3])
         if params.technique == "uniform":
             side = np.copysign(np.float32(1), n_f[0] * sphere[0] + n_f[1] * sphere[1] + n_f[2] * sphere[2])

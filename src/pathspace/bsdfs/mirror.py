@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .base import BSDFSample, face_forward, reflect
+from .base import BSDFSample, Surface, reflect
 
 __all__ = ["Mirror"]
 
@@ -41,12 +41,11 @@ class Mirror:
         return MirrorParams(colours.lookup(tables["reflectance"], ids))
 
     @staticmethod
-    def eval(params: MirrorParams, n, wo, wi) -> tuple[np.ndarray, np.ndarray]:
-        return np.zeros_like(params.reflectance), np.zeros(wo.shape[1])
+    def eval(params: MirrorParams, surface: Surface, wi) -> tuple[np.ndarray, np.ndarray]:
+        return np.zeros_like(params.reflectance), np.zeros(wi.shape[1])
 
     @staticmethod
-    def sample(params: MirrorParams, n, wo, u, mode="radiance") -> BSDFSample:
-        n_f, cos_o = face_forward(n, wo)
-        wi = reflect(wo, n_f, cos_o)
-        count = wo.shape[1]
+    def sample(params: MirrorParams, surface: Surface, u, mode="radiance") -> BSDFSample:
+        wi = reflect(surface.wo, surface.n, surface.cos_o)
+        count = wi.shape[1]
         return BSDFSample(wi.astype(np.float32), params.reflectance, np.ones(count), np.ones(count, dtype=bool))

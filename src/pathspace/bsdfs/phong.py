@@ -16,7 +16,7 @@ import numpy as np
 
 from .. import warp
 from ..vecmath import Frame
-from .base import BSDFSample, face_forward, reflect
+from .base import BSDFSample, Surface, reflect
 
 __all__ = ["Phong"]
 
@@ -85,14 +85,14 @@ class Phong:
         return (params.kd * warp.INV_PI + params.ks * lobe) * positive
 
     @staticmethod
-    def eval(params: PhongParams, n, wo, wi) -> tuple[np.ndarray, np.ndarray]:
-        n_f, cos_o = face_forward(n, wo)
+    def eval(params: PhongParams, surface: Surface, wi) -> tuple[np.ndarray, np.ndarray]:
+        n_f, wo, cos_o = surface.n, surface.wo, surface.cos_o
         cos_i, power, pdf = Phong._lobes(params, n_f, wo, cos_o, wi)
         return Phong._f_cos(params, cos_i, power), pdf
 
     @staticmethod
-    def sample(params: PhongParams, n, wo, u, mode="radiance") -> BSDFSample:
-        n_f, cos_o = face_forward(n, wo)
+    def sample(params: PhongParams, surface: Surface, u, mode="radiance") -> BSDFSample:
+        n_f, wo, cos_o = surface.n, surface.wo, surface.cos_o
         glossy = u[0] < params.glossy_prob
         # Glossy lobe: cos alpha = u^(1 / (e + 1)) about the mirror direction.
         r = reflect(wo.astype(np.float64), n_f.astype(np.float64), cos_o.astype(np.float64))

@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import dataclasses
 
-from .base import TILE_PIXELS, ItemResult, WorkItem, work_layout
+from .base import TILE_PIXELS, WorkItem, work_layout
 from .pt import PathTracer
 
-__all__ = ["ESTIMATORS", "make_integrator", "WorkItem", "ItemResult", "TILE_PIXELS", "work_layout"]
+__all__ = ["ESTIMATORS", "make_integrator", "WorkItem", "TILE_PIXELS", "work_layout"]
 
 ESTIMATORS = {"pt": PathTracer}
 

@@ -1,11 +1,11 @@
-"""What the render driver hands an estimator, and what it gets back."""
+"""What the render driver hands an estimator: work items, and how they are laid out."""
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["WorkItem", "ItemResult", "TILE_PIXELS", "work_layout"]
+__all__ = ["WorkItem", "TILE_PIXELS", "work_layout"]
 
 # Wavefronts hold at most about this many paths: large enough to amortise
 # Python's per-operation overhead, small enough for the arrays to stay in cache
@@ -35,8 +35,13 @@ def work_layout(pixel_count: int, passes: int | None, workers: int) -> tuple[int
 
 @dataclass(frozen=True)
 class WorkItem:
-    """Passes ``passes`` of pixel tile ``tile`` (pixels ``pixel_start`` .. ``pixel_stop`` - 1)."""
+    """Passes ``passes`` of pixel tile ``tile`` (pixels ``pixel_start`` .. ``pixel_stop`` - 1).
 
+    ``index`` numbers the items of a render in the order their results are
+    added to the film.
+    """
+
+    index: int
     passes: range
     tile: int
     pixel_start: int
@@ -56,12 +61,3 @@ class WorkItem:
     def pixels(self) -> np.ndarray:
         """Pixel index of every lane: the tile's pixels, once per pass."""
         return np.tile(np.arange(self.pixel_start, self.pixel_stop, dtype=np.int64), len(self.passes))
-
-
-@dataclass
-class ItemResult:
-    """Pixel samples of one work item, lane for lane: ``values[:, k]`` is a sample of ``item.pixels[k]``."""
-
-    values: np.ndarray
-    rays: int
-    truncated: int = 0

@@ -33,37 +33,43 @@ rr, rr_depth, rr_probability, rr_cap
     Russian roulette policy and its parameters (see :mod:`pathspace.roulette`);
     default: throughput-based survival (pbrt-v4's rule) from depth 5.
 
-Every wavefront lane carries one path.  All live lanes are at the same depth,
-so each bounce is a handful of array operations over the live lanes, grouped
-by material kind, followed by compaction; rays go to Embree in one batch per
-bounce (closest hits) plus one batch of shadow rays.  Each path consumes 4
-random numbers for the camera (pixel position, lens) and 8 per bounce (light
-choice and position, BSDF lobe and direction, roulette, mixture choice),
-drawn whether used or not, so a replaying sampler sees the same dimensions in
-the same order.
+Every wavefront lane carries one path.  Each bounce is a handful of array
+operations over the live lanes, grouped by material kind, followed by
+compaction; rays go to Embree in one batch per bounce (closest hits) plus one
+batch of shadow rays.  New work items join the wavefront as paths end, so it
+never dwindles to a tail of nearly empty bounces.  Each path consumes 4
+random numbers for the camera (pixel position, lens) and 7 per bounce (light
+choice and position, BSDF lobe and direction, roulette), plus one for the
+mixture choice when mixture sampling, drawn whether used or not, so a
+replaying sampler sees the same dimensions in the same order.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Iterator
 
 import numpy as np
 
-from ..bsdfs import DIFFUSE_SAMPLING, MaterialLanes
+from ..bsdfs import DIFFUSE_SAMPLING, MaterialLanes, Surface
 from ..colours import RGBColours
 from ..lights import MEASURES, SELECTIONS
 from ..mis import HEURISTICS, mis_weight
 from ..roulette import RussianRoulette
+from ..sampler import StreamSampler
 from ..vecmath import dot, offset_along
-from .base import ItemResult, WorkItem
+from .base import TILE_PIXELS, WorkItem
+from .wavefront import ItemBook, Lanes
 
 __all__ = ["PathTracer"]
 
 LIGHT_SAMPLING = ("mis", "nee", "none", "mixture")
 CAMERA_DIMS = 4
-DIMS_PER_BOUNCE = 8
+DIMS_PER_BOUNCE = 7  # + 1 for the mixture choice
 # Paths still alive after this many segments are cut and counted (``truncated`` in the stats): only
 # scenes that trap light without loss (mirror or glass enclosures) get there.
 SAFETY_DEPTH = 10_000
+# New work items join the wavefront while fewer paths than this are alive.
+REFILL = TILE_PIXELS // 8
 
 
 @dataclass
@@ -134,83 +140,107 @@ class PathTracer:
 
     # -- rendering ---------------------------------------------------------------------------------
 
-    def render_item(self, scene, item: WorkItem, sampler, threads: int) -> ItemResult:
-        """Trace one path per lane of ``item`` and return its pixel samples."""
+    def render_stream(self, scene, next_item, seed: int, counters: dict) -> Iterator[tuple[WorkItem, np.ndarray]]:
+        """Render work items taken from ``next_item()`` (None when there are no more) on one wavefront.
+
+        Yields (item, values (C, n)) as items finish: ``values[:, k]`` is the
+        sample of pixel ``item.pixels[k]``.  New items join whenever fewer than
+        ``REFILL`` paths are alive.  Adds ray and truncation counts to ``counters``.
+        """
         colours = RGBColours
         mesh, lights, accel, table = scene.mesh, scene.lights, scene.accel, scene.materials
         eps = np.float32(scene.ray_offset)
         options = {"diffuse_sampling": self.diffuse_sampling}
         strategy = self.light_sampling if lights.count else "none"
         env = lights.environment is not None
-
-        n = item.pixels.size
-        result = np.zeros((colours.channels, n))
-        lane = np.arange(n)                            # wavefront slot of each live path
-        radiance = np.zeros((colours.channels, n))    # radiance gathered so far by each live path
-        beta = np.ones((colours.channels, n))         # path throughput
-        pdf_prev = np.zeros(n)                         # solid-angle pdf of the sampled direction of the current ray
-        delta_prev = np.ones(n, dtype=bool)            # previous vertex was the camera or a delta lobe
-        u = sampler.draw(CAMERA_DIMS)
-        origin, direction = scene.camera.generate_rays(item.pixels, u[0:2], u[2:4])
-        prev_p = np.asarray(origin, dtype=np.float32)  # previous vertex (un-offset), for light pdfs
-        rays = depth = truncated = 0
-        while lane.size:
-            depth += 1
-            hits = accel.intersect(origin, direction, normals=False, threads=threads)
-            rays += lane.size
-            hit = hits.prim >= 0
-            if env and not hit.all():
-                self._escape(scene, ~hit, beta, radiance, pdf_prev, delta_prev, strategy, colours)
-            alive = np.flatnonzero(hit)
-            prim, t, b1, b2 = hits.prim, hits.t, hits.u, hits.v
-            if alive.size < lane.size:
-                _retire(result, lane, radiance, hit)
-                lane, direction, beta, pdf_prev, delta_prev, radiance, prim, t, b1, b2, prev_p = _take(
-                    alive, lane, direction, beta, pdf_prev, delta_prev, radiance, prim, t, b1, b2, prev_p)
-                sampler.keep(alive)
-                if not lane.size:
+        book = ItemBook(colours.channels)
+        sampler = StreamSampler(seed)
+        paths = Lanes(PATH_FIELDS, **_new_paths(colours.channels, np.zeros(0, np.int64),
+                                                 np.zeros((3, 0), np.float32), np.zeros((3, 0), np.float32)))
+        exhausted = False
+        while True:
+            while not exhausted and paths.size < REFILL:
+                item = next_item()
+                if item is None:
+                    exhausted = True
                     break
-            p, normal = mesh.hit_geometry(prim, b1, b2)
-            wo = -direction
-            cos_o = dot(normal, wo)
-
-            if lights.area.count:
-                self._emission(scene, prim, p, cos_o, prev_p, beta, radiance, pdf_prev, delta_prev, strategy,
-                               colours)
-
-            if depth == self.max_depth:
+                tickets = book.open(item)
+                u = sampler.add(item.keys, item.counts, CAMERA_DIMS)
+                origin, direction = scene.camera.generate_rays(item.pixels, u[0:2], u[2:4])
+                paths.extend(Lanes(PATH_FIELDS, **_new_paths(colours.channels, tickets, np.asarray(origin),
+                                                              direction)))
+            if not paths.size:
                 break
-            if depth == SAFETY_DEPTH:
-                truncated += lane.size
-                break
-            u = sampler.draw(DIMS_PER_BOUNCE)
-            materials = MaterialLanes(table, mesh.material.take(prim), colours, options)
-            if strategy in ("mis", "nee"):
-                radiance += self._next_event(scene, materials, p, normal, wo, beta, u[0:3], eps, threads, colours)
-                rays += lane.size
+            counters["rays"] += self._bounce(scene, paths, sampler, book, strategy, env, eps, colours, options,
+                                             counters)
+            yield from book.finished()
 
-            sample = materials.sample(normal, wo, u[3:6])
-            if strategy == "mixture":
-                self._mixture(scene, materials, p, normal, wo, sample, u, eps, threads, colours)
-            weight = sample.weight
-            beta = beta * weight
-            pdf_prev, delta_prev, direction = sample.pdf, sample.delta, sample.wi
-            origin = offset_along(p, normal, dot(normal, direction), eps)
-            prev_p = p
+    def _bounce(self, scene, paths, sampler, book, strategy, env, eps, colours, options, counters) -> int:
+        """Advance every path by one segment: trace, gather emission, sample lights and the BSDF, roulette."""
+        mesh, lights, table = scene.mesh, scene.lights, scene.materials
+        paths.depth += 1
+        hits = scene.accel.intersect(paths.origin, paths.direction, normals=False, threads=1)
+        rays = paths.size
+        hit = hits.prim >= 0
+        if env and not hit.all():
+            self._escape(scene, ~hit, paths, strategy, colours)
+        prim, b1, b2 = hits.prim, hits.u, hits.v
+        # Paths end here if they escaped, reached max_depth (after counting emission) or the safety depth.
+        end = ~hit
+        if not hit.all():
+            alive = np.flatnonzero(hit)
+            _retire(book, paths, end)
+            paths.keep(alive, stale=("origin",))  # every surviving path gets a new origin below
+            sampler.keep(alive)
+            prim, b1, b2 = prim.take(alive), b1.take(alive), b2.take(alive)
+            if not paths.size:
+                return rays
+        p, normal = mesh.hit_geometry(prim, b1, b2)
+        cos_o = -dot(normal, paths.direction)
+        if lights.area.count:
+            self._emission(scene, prim, p, cos_o, paths, strategy, colours)
+        stop = paths.depth >= (self.max_depth if self.max_depth > 0 else SAFETY_DEPTH)
+        if stop.any():
+            counters["truncated"] += int(np.count_nonzero(stop & (paths.depth >= SAFETY_DEPTH)))
+            alive = np.flatnonzero(~stop)
+            _retire(book, paths, stop)
+            paths.keep(alive, stale=("origin",))
+            sampler.keep(alive)
+            prim, p, normal, cos_o = prim.take(alive), np.take(p, alive, axis=1), np.take(normal, alive, axis=1), \
+                cos_o.take(alive)
+            if not paths.size:
+                return rays
+        surface = Surface.facing(normal, paths.direction, cos_o)
 
-            survival = self.roulette.survival(depth, beta, weight)
-            keep = np.maximum(np.maximum(weight[0], weight[1]), weight[2]) > 0
-            if survival is not None:
-                keep &= u[6] < survival
-                np.divide(beta, survival, out=beta, where=survival > 0)
+        u = sampler.draw(DIMS_PER_BOUNCE + (strategy == "mixture"))
+        materials = MaterialLanes(table, mesh.material.take(prim), colours, options)
+        if strategy in ("mis", "nee"):
+            paths.radiance += self._next_event(scene, materials, p, surface, paths.beta, u[0:3], eps, colours)
+            rays += paths.size
+
+        sample = materials.sample(surface, u[3:6])
+        if strategy == "mixture":
+            self._mixture(scene, materials, p, surface, sample, u, eps, colours)
+        weight = sample.weight
+        paths.beta = paths.beta * weight
+        paths.pdf_prev, paths.delta_prev, paths.direction = sample.pdf, sample.delta, sample.wi
+        if table.transmissive:
+            paths.origin = offset_along(p, surface.n, dot(surface.n, sample.wi), eps)
+        else:  # every sampled direction leaves on the side of wo
+            paths.origin = p + surface.n * eps
+        paths.prev_p = p
+
+        survival = self.roulette.survival(paths.depth, paths.beta, weight)
+        keep = np.maximum(np.maximum(weight[0], weight[1]), weight[2]) > 0
+        if survival is not None:
+            keep &= u[6] < survival
+            np.divide(paths.beta, survival, out=paths.beta, where=survival > 0)
+        if not keep.all():
             live = np.flatnonzero(keep)
-            if live.size < lane.size:
-                _retire(result, lane, radiance, keep)
-                lane, origin, direction, beta, pdf_prev, delta_prev, radiance, prev_p = _take(
-                    live, lane, origin, direction, beta, pdf_prev, delta_prev, radiance, prev_p)
-                sampler.keep(live)
-        _retire(result, lane, radiance, np.zeros(lane.size, dtype=bool))
-        return ItemResult(values=result, rays=rays, truncated=truncated)
+            _retire(book, paths, ~keep)
+            paths.keep(live)
+            sampler.keep(live)
+        return rays
 
     def _weight_of_hits(self, pdf_bsdf, pdf_light, delta_prev, strategy):
         """Weight of emission found by the current rays: MIS against light sampling, 1 where light
@@ -221,7 +251,7 @@ class PathTracer:
             return delta_prev.astype(np.float64)
         return np.where(delta_prev, 1.0, mis_weight(pdf_bsdf, pdf_light, self.mis, self.mis_beta))
 
-    def _emission(self, scene, prim, p, cos_o, prev_p, beta, radiance, pdf_prev, delta_prev, strategy, colours):
+    def _emission(self, scene, prim, p, cos_o, paths, strategy, colours):
         """Add emission of area lights hit by the current rays (Veach 1997, eq. 9.4 with 9.13)."""
         lights = scene.lights
         emitter = lights.area.emitter_of_triangle.take(prim)
@@ -230,22 +260,22 @@ class PathTracer:
             return
         le = lights.area.emitted(emitter.take(emits), cos_o.take(emits), colours)
         if strategy == "mis":
-            pdf_light = lights.pdf_hit(prim.take(emits), np.take(prev_p, emits, axis=1), np.take(p, emits, axis=1),
-                                       self.light_selection, self.light_measure)
+            pdf_light = lights.pdf_hit(prim.take(emits), np.take(paths.prev_p, emits, axis=1),
+                                       np.take(p, emits, axis=1), self.light_selection, self.light_measure)
         else:
             pdf_light = None
-        le = le * self._weight_of_hits(pdf_prev.take(emits), pdf_light, delta_prev.take(emits), strategy)
-        radiance[:, emits] += np.take(beta, emits, axis=1) * le
+        le = le * self._weight_of_hits(paths.pdf_prev.take(emits), pdf_light, paths.delta_prev.take(emits), strategy)
+        paths.radiance[:, emits] += np.take(paths.beta, emits, axis=1) * le
 
-    def _escape(self, scene, escaped, beta, radiance, pdf_prev, delta_prev, strategy, colours):
+    def _escape(self, scene, escaped, paths, strategy, colours):
         """Add environment radiance to rays that left the scene."""
         lanes = np.flatnonzero(escaped)
         env = scene.lights.environment_radiance(lanes.size, colours)
         pdf_env = np.full(lanes.size, scene.lights.pdf_environment(self.light_selection))
-        env = env * self._weight_of_hits(pdf_prev.take(lanes), pdf_env, delta_prev.take(lanes), strategy)
-        radiance[:, lanes] += np.take(beta, lanes, axis=1) * env
+        env = env * self._weight_of_hits(paths.pdf_prev.take(lanes), pdf_env, paths.delta_prev.take(lanes), strategy)
+        paths.radiance[:, lanes] += np.take(paths.beta, lanes, axis=1) * env
 
-    def _next_event(self, scene, materials, p, normal, wo, beta, u, eps, threads, colours):
+    def _next_event(self, scene, materials, p, surface, beta, u, eps, colours) -> np.ndarray:
         """Light-sampled direct illumination of every lane, MIS-weighted against BSDF sampling; (C, N).
 
         Estimates Le f |cos| / p_light (Veach 1997, eq. 9.4) with one light
@@ -253,35 +283,34 @@ class PathTracer:
         Delta materials get nothing (f is zero for any light direction).
         """
         ls = scene.lights.sample(p, u, colours, self.light_selection, self.light_measure)
-        f_cos, pdf_bsdf = materials.eval(normal, wo, ls.wi)
+        f_cos, pdf_bsdf = materials.eval(surface, ls.wi)
         with np.errstate(divide="ignore", invalid="ignore"):
             scale = 1.0 / ls.pdf
         if self.light_sampling == "mis":
             w = mis_weight(ls.pdf, pdf_bsdf, self.mis, self.mis_beta)
-            scale = scale * np.where(ls.delta, 1.0, w)
-        contribution = beta * f_cos * (ls.value * scale)
-        useful = np.flatnonzero(np.maximum(np.maximum(contribution[0], contribution[1]), contribution[2]) > 0)
-        visible = np.zeros(p.shape[1], dtype=bool)
-        if useful.size:
-            wi = np.take(ls.wi, useful, axis=1)
-            start = offset_along(np.take(p, useful, axis=1), np.take(normal, useful, axis=1),
-                                 dot(np.take(normal, useful, axis=1), wi), eps)
-            distance = ls.distance.take(useful)
-            finite = np.isfinite(distance)
-            if finite.all():
-                end = offset_along(np.take(ls.point, useful, axis=1), np.take(ls.normal, useful, axis=1),
-                                   ls.cos_light.take(useful), eps)
-                blocked = scene.accel.occluded(start, end - start, 0.0, 1.0, threads=threads)
+            scale *= np.where(ls.delta, 1.0, w) if scene.lights.has_delta else w
+        useful = ls.facing & (scale > 0) & (np.maximum(np.maximum(f_cos[0], f_cos[1]), f_cos[2]) > 0)
+        lanes = np.flatnonzero(useful)
+        if lanes.size:
+            n = np.take(surface.n, lanes, axis=1)
+            wi = np.take(ls.wi, lanes, axis=1)
+            start = np.take(p, lanes, axis=1) + n * eps  # f > 0: wi leaves on the side of n
+            distance = ls.distance.take(lanes)
+            if np.isfinite(distance).all():
+                end = offset_along(np.take(ls.point, lanes, axis=1), np.take(ls.normal, lanes, axis=1),
+                                   ls.cos_light.take(lanes), eps)
+                blocked = scene.accel.occluded(start, end - start, 0.0, 1.0, threads=1)
             else:
-                # Point lights sit at `point` (no surface: no offset); infinite lights along wi without end.
-                span = np.where(finite, distance * np.float32(1 - 1e-5), np.inf)
-                blocked = scene.accel.occluded(start, wi, 0.0, span, threads=threads)
-            visible[useful] = ~blocked
-        return np.where(visible, contribution, 0.0)
+                # Point lights have no surface to offset from; infinite lights have no end.
+                span = np.where(np.isfinite(distance), distance * np.float32(1 - 1e-5), np.inf)
+                blocked = scene.accel.occluded(start, wi, 0.0, span, threads=1)
+            useful[lanes[blocked]] = False
+        scale = np.where(useful, scale, 0.0)
+        return beta * f_cos * (ls.value * scale)
 
     # -- mixture sampling --------------------------------------------------------------------------
 
-    def _mixture(self, scene, materials, p, normal, wo, sample, u, eps, threads, colours) -> None:
+    def _mixture(self, scene, materials, p, surface, sample, u, eps, colours) -> None:
         """Turn BSDF samples into samples of the mixture alpha p_light + (1 - alpha) p_bsdf (in place).
 
         With probability alpha a lane takes the direction of a light sample
@@ -293,9 +322,9 @@ class PathTracer:
         if materials.delta is not None:
             use_light &= ~materials.delta
         wi = np.where(use_light, ls.wi, sample.wi)
-        f_cos, pdf_bsdf = materials.eval(normal, wo, wi)
-        origin = offset_along(p, normal, dot(normal, wi), eps)
-        pdf_light = self._light_density(scene, p, origin, wi, threads)
+        f_cos, pdf_bsdf = materials.eval(surface, wi)
+        origin = offset_along(p, surface.n, dot(surface.n, wi), eps)
+        pdf_light = self._light_density(scene, p, origin, wi)
         alpha = self.mixture_alpha
         pdf = alpha * pdf_light + (1.0 - alpha) * pdf_bsdf
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -305,7 +334,7 @@ class PathTracer:
         sample.weight = np.where(delta, sample.weight, weight)
         sample.pdf = np.where(delta, sample.pdf, pdf)
 
-    def _light_density(self, scene, receivers, origin, direction, threads):
+    def _light_density(self, scene, receivers, origin, direction):
         """Solid-angle density with which light sampling at ``receivers`` produces each direction.
 
         Sums over every emitting triangle the ray meets (found with an
@@ -321,7 +350,7 @@ class PathTracer:
         tmin = np.zeros(count, dtype=np.float32)
         o, d = origin, direction
         while lanes.size:
-            h = emitters.intersect(o, d, tmin, np.inf, normals=False, threads=threads)
+            h = emitters.intersect(o, d, tmin, np.inf, normals=False, threads=1)
             found = np.flatnonzero(h.prim >= 0)
             lanes, o, d = lanes.take(found), np.take(o, found, axis=1), np.take(d, found, axis=1)
             prim, t = h.prim.take(found), h.t.take(found)
@@ -333,15 +362,23 @@ class PathTracer:
         return total
 
 
-def _take(indices: np.ndarray, *arrays: np.ndarray) -> list[np.ndarray]:
-    """The lanes ``indices`` of each array (lanes along the last axis)."""
-    return [np.take(a, indices, axis=-1) for a in arrays]
+PATH_FIELDS = ("ticket", "depth", "origin", "direction", "prev_p", "beta", "radiance", "pdf_prev", "delta_prev")
 
 
-def _retire(result: np.ndarray, lane: np.ndarray, radiance: np.ndarray, keep: np.ndarray) -> None:
-    """Store the radiance of the paths that end here (where ``keep`` is False) in their wavefront slots."""
-    done = np.flatnonzero(~keep)
-    if done.size:
-        slots = lane.take(done)
-        for c in range(result.shape[0]):
-            result[c].put(slots, radiance[c].take(done))
+def _new_paths(channels: int, tickets: np.ndarray, origin: np.ndarray, direction: np.ndarray):
+    """State of camera paths about to trace their first segment (``tickets``: see :class:`ItemBook`)."""
+    n = tickets.size
+    return dict(ticket=tickets, depth=np.zeros(n, dtype=np.int32),
+                origin=np.ascontiguousarray(origin, dtype=np.float32), direction=direction,
+                prev_p=np.ascontiguousarray(origin, dtype=np.float32),  # previous vertex (un-offset), for light pdfs
+                beta=np.ones((channels, n)),                              # path throughput
+                radiance=np.zeros((channels, n)),                         # radiance gathered so far
+                pdf_prev=np.zeros(n),                    # solid-angle pdf of the sampled direction of the current ray
+                delta_prev=np.ones(n, dtype=bool))       # the previous vertex was the camera or a delta lobe
+
+
+def _retire(book: ItemBook, paths: Lanes, done: np.ndarray) -> None:
+    """Hand the radiance of the paths that end here (``done``) to their items."""
+    lanes = np.flatnonzero(done)
+    if lanes.size:
+        book.store(paths.ticket.take(lanes), np.take(paths.radiance, lanes, axis=1))

@@ -34,14 +34,15 @@ AREA, POINT, SPOT, DIRECTIONAL, ENVIRONMENT = range(5)
 class LightSample:
     """One light sample per receiver (N lanes)."""
 
-    __slots__ = ("wi", "distance", "point", "normal", "value", "pdf", "delta", "cos_light")
+    __slots__ = ("wi", "distance", "point", "normal", "value", "facing", "pdf", "delta", "cos_light")
 
-    def __init__(self, wi, distance, point, normal, value, pdf, delta, cos_light):
+    def __init__(self, wi, distance, point, normal, value, facing, pdf, delta, cos_light):
         self.wi = wi                # (3, N) float32 unit, receiver -> light
         self.distance = distance    # (N,) float32; inf for directional and environment samples
         self.point = point          # (3, N) float32 point on the light (finite lights)
         self.normal = normal        # (3, N) float32 light surface normal (area lights; else zero)
         self.value = value          # (C, N) float64: radiance, or I / d^2, or irradiance (see module doc)
+        self.facing = facing        # (N,) bool: the light emits toward the receiver (one-sided area lights)
         self.pdf = pdf              # (N,) float64 solid-angle pdf times the selection pmf; pmf alone if delta
         self.delta = delta          # (N,) bool
         self.cos_light = cos_light  # (N,) float32 dot(normal, -wi) for area lights; 1 otherwise
@@ -143,6 +144,7 @@ class LightSet:
         point = np.zeros((3, count), dtype=np.float32)
         normal = np.zeros((3, count), dtype=np.float32)
         value = np.zeros((colours.channels, count))
+        facing = np.ones(count, dtype=bool)
         pdf = np.zeros(count)
         delta = np.zeros(count, dtype=bool)
         cos_light = np.ones(count, dtype=np.float32)
@@ -152,7 +154,7 @@ class LightSet:
             if k == AREA:
                 s = self._sample_area(idx, ref, uu, pmf.take(lanes), colours, measure)
                 wi[:, lanes], distance[lanes], point[:, lanes], normal[:, lanes] = s.wi, s.distance, s.point, s.normal
-                value[:, lanes], pdf[lanes], cos_light[lanes] = s.value, s.pdf, s.cos_light
+                value[:, lanes], facing[lanes], pdf[lanes], cos_light[lanes] = s.value, s.facing, s.pdf, s.cos_light
                 continue
             if k == ENVIRONMENT:
                 d = warp.square_to_uniform_sphere(uu)
@@ -184,12 +186,13 @@ class LightSet:
             distance[lanes] = dist
             point[:, lanes] = position
             value[:, lanes] = colours.lookup_unbounded(intensity, idx) * (falloff / dist2)
-        return LightSample(wi, distance, point, normal, value, pdf, delta, cos_light)
+        return LightSample(wi, distance, point, normal, value, facing, pdf, delta, cos_light)
 
     def _sample_area(self, emitter, receivers, u, pmf, colours, measure) -> LightSample:
         point, normal, wi, distance, cos_light, pdf = self.area.sample(emitter, receivers, u, measure)
-        value = self.area.emitted(emitter, cos_light, colours)
-        return LightSample(wi, distance, point, normal, value, pdf * pmf, np.zeros(pmf.shape, dtype=bool), cos_light)
+        facing = self.area.two_sided.take(emitter) | (cos_light > 0)
+        return LightSample(wi, distance, point, normal, colours.lookup_unbounded(self.area.radiance, emitter), facing,
+                           pdf * pmf, np.zeros(pmf.shape, dtype=bool), cos_light)
 
     def pdf_hit(self, triangles: np.ndarray, receivers: np.ndarray, points: np.ndarray, selection: str = "power",
                 measure: str = "area") -> np.ndarray:

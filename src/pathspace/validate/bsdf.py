@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..bsdfs import MaterialTable
+from ..bsdfs import MaterialTable, Surface
 from ..colours import RGBColours
 from .chi2 import ChiSquareResult, chi2_test_directions
 
@@ -34,17 +34,17 @@ class BSDFCheck:
         params = self.table.gather(0, ids, RGBColours, self.options)
         n = np.repeat(self.normal.astype(np.float32)[:, None], count, axis=1)
         wo = np.repeat(self.wo.astype(np.float32)[:, None], count, axis=1)
-        return params, n, wo
+        return params, Surface.facing(n, -wo)
 
     def sample(self, u: np.ndarray):
         """The model's samples for uniforms u (3, N)."""
-        params, n, wo = self._lanes(u.shape[1])
-        return self.model.sample(params, n, wo, u, self.mode)
+        params, surface = self._lanes(u.shape[1])
+        return self.model.sample(params, surface, u, self.mode)
 
     def eval(self, wi: np.ndarray):
         """(f |cos|, pdf) at directions wi (3, N)."""
-        params, n, wo = self._lanes(wi.shape[1])
-        return self.model.eval(params, n, wo, wi.astype(np.float32))
+        params, surface = self._lanes(wi.shape[1])
+        return self.model.eval(params, surface, wi.astype(np.float32))
 
 
 def bsdf_chi2(check: BSDFCheck, *, sample_count: int = 500_000, seed: int = 0, test_count: int = 1,

@@ -1,0 +1,89 @@
+"""Bookkeeping of a persistent wavefront: many work items in flight, lanes refilled as paths end.
+
+Paths end at different depths, so a wavefront started from one work item
+shrinks to a long tail of nearly empty bounces.  Instead, new items join the
+wavefront whenever it falls below a threshold; each lane remembers which
+item and pixel sample it belongs to, finished paths are written to their
+item's buffer, and an item is handed back as soon as its last path ends.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .base import WorkItem
+
+__all__ = ["ItemBook", "Lanes"]
+
+
+class ItemBook:
+    """Result buffers of the work items in flight.
+
+    Every sample of every item gets a *ticket*: the items' samples are
+    numbered consecutively in the order the items were opened, so one integer
+    per lane says where its result goes.  Lanes keep the order in which they
+    joined, so the tickets of live lanes are always increasing.
+    """
+
+    def __init__(self, channels: int) -> None:
+        self.channels = channels
+        self.first: list[int] = []      # first ticket of each open item, increasing
+        self.open_items: list[WorkItem] = []
+        self.values: list[np.ndarray] = []
+        self.remaining: list[int] = []
+        self._next_ticket = 0
+
+    def open(self, item: WorkItem) -> np.ndarray:
+        """Start an item; return the tickets of its samples."""
+        count = len(item.pixels)
+        tickets = np.arange(self._next_ticket, self._next_ticket + count, dtype=np.int64)
+        self.first.append(self._next_ticket)
+        self.open_items.append(item)
+        self.values.append(np.zeros((self.channels, count)))
+        self.remaining.append(count)
+        self._next_ticket += count
+        return tickets
+
+    def store(self, tickets: np.ndarray, values: np.ndarray) -> None:
+        """Write finished samples ``values`` (C, k) of the lanes holding increasing ``tickets``."""
+        bounds = np.searchsorted(tickets, self.first + [self._next_ticket])
+        for j, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:])):
+            if hi > lo:
+                where = tickets[lo:hi] - self.first[j]
+                for c in range(self.channels):
+                    self.values[j][c].put(where, values[c, lo:hi])
+                self.remaining[j] -= hi - lo
+
+    def finished(self) -> list[tuple[WorkItem, np.ndarray]]:
+        """Items whose every sample is done, removed from the book, in the order they were opened."""
+        out = []
+        for j in reversed(range(len(self.remaining))):
+            if self.remaining[j] == 0:
+                out.append((self.open_items.pop(j), self.values.pop(j)))
+                del self.first[j], self.remaining[j]
+        return out[::-1]
+
+
+class Lanes:
+    """Per-lane state arrays (lanes along the last axis), compacted and extended together."""
+
+    def __init__(self, fields: tuple[str, ...], **arrays: np.ndarray) -> None:
+        self.fields = fields
+        for name in fields:
+            setattr(self, name, arrays[name])
+
+    @property
+    def size(self) -> int:
+        return int(getattr(self, self.fields[0]).shape[-1])
+
+    def keep(self, indices: np.ndarray, stale: tuple[str, ...] = ()) -> None:
+        """Keep only the lanes ``indices``; fields named in ``stale`` are dropped (the caller replaces them)."""
+        for name in self.fields:
+            setattr(self, name, None if name in stale else np.take(getattr(self, name), indices, axis=-1))
+
+    def extend(self, other: "Lanes") -> None:
+        """Append the lanes of ``other``."""
+        for name in self.fields:
+            mine = getattr(self, name)
+            # A stale field (None) can only remain on an emptied wavefront.
+            setattr(self, name, getattr(other, name) if mine is None else np.concatenate([mine, getattr(other, name)],
+                                                                                          axis=-1))
