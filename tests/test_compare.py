@@ -23,7 +23,7 @@ def test_false_alarm_rate_is_about_alpha():
     assert failures <= 25  # expected about 10 (5%); 25 has probability < 1e-4 for a calibrated test
 
 
-def test_detects_a_one_percent_bias():
+def test_detects_a_two_percent_bias():
     rng = np.random.default_rng(1)
     result = compare_estimates(*noisy_pair(rng, bias=0.02, samples=64))
     assert not result.passed and "DIFFERENT" in str(result)
@@ -80,3 +80,12 @@ def test_furnace_to_a_tenth_of_a_percent():
         exact = furnace_radiance(albedo, 1.0)
         assert error < 1e-3 * exact * 1.5
         assert abs(values.mean() - exact) < 3 * error
+
+
+def test_undersampled_blocks_are_reported():
+    rng = np.random.default_rng(3)
+    a, va, b, vb = noisy_pair(rng, samples=64)
+    b[0:8, 0:8, 0] = 0.0   # an estimator that found nothing in one block...
+    vb[0:8, 0:8, 0] = 0.0  # ... and so reports no variance there
+    result = compare_estimates(a, va, b, vb)
+    assert result.undersampled == 1 and "undersampled" in str(result)

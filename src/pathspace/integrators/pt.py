@@ -295,15 +295,16 @@ class PathTracer:
             n = np.take(surface.n, lanes, axis=1)
             wi = np.take(ls.wi, lanes, axis=1)
             start = np.take(p, lanes, axis=1) + n * eps  # f > 0: wi leaves on the side of n
-            distance = ls.distance.take(lanes)
-            if np.isfinite(distance).all():
-                end = offset_along(np.take(ls.point, lanes, axis=1), np.take(ls.normal, lanes, axis=1),
-                                   ls.cos_light.take(lanes), eps)
+            # Shadow rays end just off the light's surface on the receiver's side (point lights have no
+            # surface, so their normal is zero); rays toward infinite lights have no end.
+            end = offset_along(np.take(ls.point, lanes, axis=1), np.take(ls.normal, lanes, axis=1),
+                               ls.cos_light.take(lanes), eps)
+            finite = np.isfinite(ls.distance.take(lanes))
+            if finite.all():
                 blocked = scene.accel.occluded(start, end - start, 0.0, 1.0, threads=1)
             else:
-                # Point lights have no surface to offset from; infinite lights have no end.
-                span = np.where(np.isfinite(distance), distance * np.float32(1 - 1e-5), np.inf)
-                blocked = scene.accel.occluded(start, wi, 0.0, span, threads=1)
+                blocked = scene.accel.occluded(start, np.where(finite, end - start, wi), 0.0,
+                                               np.where(finite, 1.0, np.inf), threads=1)
             useful[lanes[blocked]] = False
         scale = np.where(useful, scale, 0.0)
         return beta * f_cos * (ls.value * scale)

@@ -13,6 +13,11 @@ Two complementary tests, combined with a Sidak correction:
 
 The estimates are independent across blocks; channels of one render are
 correlated (they share paths), hence one global test per channel.
+
+The test trusts the variance estimates.  An estimator that has not yet found
+a rare light path in some block reports mean 0 and variance 0 there, which
+no z-test can see through; such blocks are counted as *undersampled* in the
+report, and the remedy is more samples.
 """
 from __future__ import annotations
 
@@ -38,14 +43,19 @@ class ComparisonResult:
     significance: float        # per sub-test, after the Sidak correction
     block: int
     worst_block: tuple[int, int, int]
+    undersampled: int          # block-channels where one estimate is exactly 0 with variance 0 and the other is not
 
     def __str__(self) -> str:
         verdict = "same image" if self.passed else "DIFFERENT images"
         by, bx, c = self.worst_block
-        return (f"{verdict}: max |z| = {self.max_abs_z:.2f} over {self.z.size} block-channels of {self.block}x"
+        text = (f"{verdict}: max |z| = {self.max_abs_z:.2f} over {self.z.size} block-channels of {self.block}x"
                 f"{self.block} pixels (critical {self.critical_z:.2f}; worst at block row {by}, column {bx}, "
                 f"channel {c}); global chi-square p-values per channel "
                 f"{', '.join(f'{p:.3g}' for p in self.chi2_p_values)} (significance {self.significance:.3g} each)")
+        if self.undersampled:
+            text += (f"; {self.undersampled} block-channels look undersampled (one estimate found nothing there): "
+                     "render more samples before trusting this verdict")
+        return text
 
 
 def _blocks(image: np.ndarray, block: int) -> np.ndarray:
@@ -69,10 +79,14 @@ def compare_estimates(image_a: np.ndarray, variance_a: np.ndarray, image_b: np.n
     h, w, _ = image_a.shape
     if block < 1 or block > min(h, w):
         raise ValueError(f"block must lie in [1, {min(h, w)}], got {block}")
-    diff = _blocks(np.asarray(image_a, np.float64) - np.asarray(image_b, np.float64), block)
+    mean_a, mean_b = _blocks(np.asarray(image_a, np.float64), block), _blocks(np.asarray(image_b, np.float64), block)
+    diff = mean_a - mean_b
     # Variance of a block mean: the mean of the pixel variances over block^2 pixels, divided by block^2.
-    var = (_blocks(np.asarray(variance_a, np.float64), block) + _blocks(np.asarray(variance_b, np.float64), block))
-    var /= block * block
+    var_a, var_b = _blocks(np.asarray(variance_a, np.float64), block), _blocks(np.asarray(variance_b, np.float64), block)
+    var = (var_a + var_b) / (block * block)
+    empty_a, empty_b = (mean_a == 0) & (var_a == 0), (mean_b == 0) & (var_b == 0)
+    undersampled = int(np.count_nonzero((empty_a & (mean_b != 0) & (var_b > 0)) |
+                                        (empty_b & (mean_a != 0) & (var_a > 0))))
     with np.errstate(divide="ignore", invalid="ignore"):
         z = np.where(var > 0, diff / np.sqrt(var), np.where(diff == 0, 0.0, np.inf))
     channels = z.shape[2]
@@ -86,4 +100,4 @@ def compare_estimates(image_a: np.ndarray, variance_a: np.ndarray, image_b: np.n
                        if np.all(finite[..., c]) else 0.0 for c in range(channels)])
     passed = bool(abs_z.max() < critical and np.all(chi2_p >= significance))
     return ComparisonResult(passed, z, float(abs_z.max()), critical, chi2_p, significance, block,
-                            tuple(int(i) for i in worst))
+                            tuple(int(i) for i in worst), undersampled)

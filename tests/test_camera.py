@@ -1,0 +1,86 @@
+"""Cameras: direction density (chi-square), importance normalisation, raster projection, thin lens."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pathspace.camera import PinholeCamera, ThinLensCamera
+from pathspace.validate import chi2_test_directions
+
+CAMERAS = {
+    "pinhole": PinholeCamera([0, 0, 0], [0, 0, 1], [0, 1, 0], 60.0, 40, 30),
+    "thinlens": ThinLensCamera([0, 0, 0], [0, 0, 1], [0, 1, 0], 60.0, 40, 30, aperture_radius=0.2,
+                               focus_distance=3.0),
+}
+
+
+@pytest.mark.parametrize("name", CAMERAS)
+def test_primary_ray_directions_follow_pdf_direction(name):
+    """Rays through uniform film points leave the lens centre (pinhole) with density 1 / (A cos^3 theta)."""
+    camera = CAMERAS["pinhole"]
+
+    def sample(u):
+        count = u.shape[1]
+        pixels = np.minimum((u[0] * camera.pixel_count).astype(np.int64), camera.pixel_count - 1)
+        jitter = np.stack((u[1], u[2]))
+        _, d = camera.generate_rays(pixels, jitter, u[3:5])
+        return d, np.ones(count, bool)
+
+    result = chi2_test_directions(sample, camera.pdf_direction, sample_count=400_000, dims=5, res_z=200,
+                                  res_phi=100)
+    assert result.passed, str(result)
+
+
+@pytest.mark.parametrize("name", CAMERAS)
+def test_importance_over_sampling_density_is_one(name):
+    """We cos / (p_position p_direction) = 1 for every primary ray: importance and pdfs agree."""
+    camera = CAMERAS[name]
+    rng = np.random.default_rng(0)
+    pixels = rng.integers(0, camera.pixel_count, 1000)
+    origins, directions = camera.generate_rays(pixels, rng.random((2, 1000)), rng.random((2, 1000)))
+    lens = origins.astype(np.float64)
+    we = camera.importance(directions, lens)
+    cos = camera.cos_to_axis(directions)
+    pdf_pos = 1.0 / camera.lens_area
+    np.testing.assert_allclose(we * cos / (pdf_pos * camera.pdf_direction(directions, lens)), 1.0, rtol=1e-9)
+
+
+@pytest.mark.parametrize("name", CAMERAS)
+def test_raster_inverts_ray_generation(name):
+    camera = CAMERAS[name]
+    rng = np.random.default_rng(1)
+    pixels = rng.integers(0, camera.pixel_count, 500)
+    jitter = rng.random((2, 500))
+    origins, directions = camera.generate_rays(pixels, jitter, rng.random((2, 500)))
+    points = origins.astype(np.float64) + directions.astype(np.float64) * rng.uniform(1, 10, 500)
+    raster, inside = camera.raster(points, origins.astype(np.float64))
+    assert inside.all()
+    expected = np.stack((pixels % camera.width + jitter[0], pixels // camera.width + jitter[1]))
+    np.testing.assert_allclose(raster, expected, atol=2e-4)
+
+
+def test_thin_lens_focus():
+    """Every lens point sends a pixel's rays through one point on the focus plane (so it is sharp there)."""
+    camera = CAMERAS["thinlens"]
+    rng = np.random.default_rng(2)
+    pixels = np.full(200, 17 * 40 + 9)
+    jitter = np.full((2, 200), 0.5)
+    origins, directions = camera.generate_rays(pixels, jitter, rng.random((2, 200)))
+    t = (3.0 - origins[2]) / directions[2]
+    focus = origins + directions * t
+    assert np.ptp(focus[0]) < 1e-5 and np.ptp(focus[1]) < 1e-5
+    assert np.ptp(origins[0]) > 0.1  # the lens points are spread over the aperture
+
+
+def test_sample_importance_connects_to_the_lens():
+    camera = CAMERAS["thinlens"]
+    rng = np.random.default_rng(3)
+    receivers = np.stack((rng.uniform(-1, 1, 300), rng.uniform(-1, 1, 300), rng.uniform(2, 6, 300)))
+    wi, we, pdf, lens, raster, valid = camera.sample_importance(receivers, rng.random((2, 300)))
+    assert valid.mean() > 0.5
+    # wi points from the receiver to the lens point; the lens point lies on the lens disk.
+    np.testing.assert_allclose(receivers + wi * np.linalg.norm(lens - receivers, axis=0), lens, atol=1e-9)
+    assert np.all(np.hypot(lens[0], lens[1]) <= 0.2 + 1e-12) and np.allclose(lens[2], 0.0)
+    # The pdf converts the lens area density to solid angle at the receiver: d^2 / (cos A_lens).
+    d2 = np.sum((lens - receivers) ** 2, axis=0)
+    np.testing.assert_allclose(pdf, d2 / (np.abs(camera.cos_to_axis(-wi)) * camera.lens_area))
