@@ -84,3 +84,21 @@ def test_sample_importance_connects_to_the_lens():
     # The pdf converts the lens area density to solid angle at the receiver: d^2 / (cos A_lens).
     d2 = np.sum((lens - receivers) ** 2, axis=0)
     np.testing.assert_allclose(pdf, d2 / (np.abs(camera.cos_to_axis(-wi)) * camera.lens_area))
+
+
+def test_rays_can_hit_the_thin_lens_but_not_the_pinhole():
+    """Rays from scene points toward sampled lens points hit the lens at that point; a pinhole is never hit."""
+    camera = CAMERAS["thinlens"]
+    rng = np.random.default_rng(4)
+    receivers = np.stack((rng.uniform(-1, 1, 200), rng.uniform(-1, 1, 200), rng.uniform(2, 6, 200)))
+    lens = camera.sample_lens(rng.random((2, 200)))
+    direction = (lens - receivers) / np.linalg.norm(lens - receivers, axis=0)
+    t, hit = camera.intersect_lens(receivers, direction)
+    assert hit.all()
+    np.testing.assert_allclose(receivers + direction * t, lens, atol=1e-9)
+    # Rays travelling away from the scene, or passing beside the aperture, miss.
+    assert not camera.intersect_lens(receivers, -direction)[1].any()
+    beside = lens + np.array([[0.5], [0.0], [0.0]])
+    miss_dir = (beside - receivers) / np.linalg.norm(beside - receivers, axis=0)
+    assert not camera.intersect_lens(receivers, miss_dir)[1].any()
+    assert not CAMERAS["pinhole"].intersect_lens(receivers, direction)[1].any()

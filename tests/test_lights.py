@@ -140,3 +140,38 @@ def test_delta_and_environment_samples():
                      [np.sin(np.radians(31)), -np.cos(np.radians(31)), 0]]).T
     falloff = spot_light.falloff(dirs)
     assert falloff[0] == 1.0 and 0 < falloff[1] < 1 and falloff[2] == 0.0
+
+
+@pytest.mark.parametrize("measure", ["area", "solid_angle"])
+@pytest.mark.parametrize("selection", ["power", "uniform"])
+def test_light_sampling_directions_chi2(selection, measure):
+    """Directions of light samples from a receiver, against the density pdf_hit gives the surface they reach."""
+    scene = two_light_scene([{"type": "environment", "radiance": [0.1, 0.1, 0.1]}])
+    lights = scene.lights
+    receiver = np.array([[0.2], [-0.3], [0.1]], dtype=np.float32)
+
+    def sample(u):
+        s = lights.sample(np.repeat(receiver, u.shape[1], axis=1), u, RGBColours, selection, measure)
+        return s.wi, np.ones(u.shape[1], bool)
+
+    def pdf(directions):
+        """Sum over every emitting triangle on the line of each direction (and the environment)."""
+        count = directions.shape[1]
+        origins = np.repeat(receiver, count, axis=1)
+        total = np.full(count, lights.pdf_environment(selection))
+        emitters = scene.emitter_accel
+        tmin = np.zeros(count, dtype=np.float32)
+        lanes = np.arange(count)
+        d = directions.astype(np.float32)
+        while lanes.size:
+            h = emitters.intersect(origins[:, lanes], d[:, lanes], tmin[lanes], np.inf, normals=False)
+            found = h.prim >= 0
+            lanes, prim, t = lanes[found], h.prim[found], h.t[found]
+            points = origins[:, lanes] + d[:, lanes] * t
+            total[lanes] += lights.pdf_hit(lights.area.triangles[prim], origins[:, lanes], points, selection, measure)
+            tmin[lanes] = t * np.float32(1 + 1e-5)
+        return total
+
+    result = chi2_test_directions(sample, pdf, sample_count=300_000, res_z=80, res_phi=160, seed=7, dims=3,
+                                  test_count=4)
+    assert result.passed, str(result)

@@ -74,7 +74,7 @@ def test_base_scene_loads():
     ({"camera__fov_axis": "diagonal"}, r"camera.fov_axis: expected one of 'x', 'y', 'smaller', 'larger'"),
     ({"camera__focal": 1}, r"camera: unknown field\(s\) 'focal'"),
     ({"camera": DELETE}, r"test.toml: camera: required field is missing"),
-    ({"materials__grey__reflectance": [0.5, 1.5, 0.5]}, r"materials.grey.reflectance: expected 3 numbers in \[0, 1\]"),
+    ({"materials__grey__reflectance": [0.5, 1.5, 0.5]}, r"materials.grey.reflectance: expected 3 finite numbers in \[0, 1\]"),
     ({"materials__grey__type": "plastic"}, r"materials.grey.type: expected one of 'diffuse', 'phong', .*, got "
                                            r"'plastic'"),
     ({"materials__grey": {"type": "phong", "diffuse": [0.6] * 3, "specular": [0.5] * 3, "exponent": 10}},

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .checks import triple
 from .vecmath import dot
 
 __all__ = ["PinholeCamera", "ThinLensCamera", "FOV_AXES"]
@@ -38,9 +39,9 @@ class PinholeCamera:
 
     def __init__(self, position, look_at, up, fov: float, width: int, height: int,
                  fov_axis: str = "smaller") -> None:
-        self.position = _vec3(position, "position")
-        self.look_at = _vec3(look_at, "look_at")
-        self.up = _vec3(up, "up")
+        self.position = triple(position, "position")
+        self.look_at = triple(look_at, "look_at")
+        self.up = triple(up, "up")
         if not (isinstance(width, (int, np.integer)) and isinstance(height, (int, np.integer))
                 and width > 0 and height > 0):
             raise ValueError(f"resolution: expected two positive integers, got {width!r} x {height!r}")
@@ -158,6 +159,11 @@ class PinholeCamera:
         lens = self.position[:, None] if lens_points is None else lens_points.astype(np.float64)
         return self.raster(lens + directions.astype(np.float64), lens)[1]
 
+    def intersect_lens(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where rays (3, N) hit the lens: (distance t (N,), hit mask (N,)).  A pinhole is never hit."""
+        count = origins.shape[1]
+        return np.full(count, np.inf), np.zeros(count, dtype=bool)
+
     def sample_lens(self, u: np.ndarray) -> np.ndarray:
         """Points (3, N) float64 on the lens: the pinhole itself."""
         return np.repeat(self.position[:, None], u.shape[1], axis=1)
@@ -213,6 +219,21 @@ class ThinLensCamera(PinholeCamera):
     def lens_area(self) -> float:
         return np.pi * self.lens_radius ** 2
 
+    def intersect_lens(self, origins: np.ndarray, directions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Where rays (3, N) hit the lens disk from the scene side: (distance t (N,), hit mask (N,)).
+
+        The lens is the disk of radius ``aperture_radius`` around ``position``
+        facing ``forward``; only rays travelling against ``forward`` hit it.
+        """
+        o = origins.astype(np.float64) - self.position[:, None]
+        d = directions.astype(np.float64)
+        along = dot(self.forward[:, None], d)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            t = -dot(self.forward[:, None], o) / along
+        point = o + d * t
+        hit = (along < 0) & (t > 0) & (dot(point, point) <= self.lens_radius ** 2)
+        return np.where(hit, t, np.inf), hit
+
     def sample_lens(self, u: np.ndarray) -> np.ndarray:
         """Points (3, N) float64 uniform on the lens disk (polar mapping)."""
         r = self.lens_radius * np.sqrt(u[0])
@@ -238,10 +259,3 @@ class ThinLensCamera(PinholeCamera):
             focus = lens + d * (self.focus_distance / dot(self.forward[:, None], d))
         raster, inside = super().raster(focus)
         return raster, inside & (dot(self.forward[:, None], d) > 0)
-
-
-def _vec3(value, name: str) -> np.ndarray:
-    array = np.asarray(value, dtype=np.float64)
-    if array.shape != (3,) or not np.all(np.isfinite(array)):
-        raise ValueError(f"{name}: expected 3 finite numbers, got {value!r}")
-    return array

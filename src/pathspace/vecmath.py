@@ -10,27 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["dot", "cross", "norm", "normalize", "orthonormal_basis", "Frame", "offset_along"]
+__all__ = ["dot", "orthonormal_basis", "Frame", "offset_along"]
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
     """Row-wise dot product of two (3, N) arrays."""
     return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-
-
-def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Row-wise cross product of two (3, N) arrays."""
-    return np.stack((a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]))
-
-
-def norm(a: np.ndarray) -> np.ndarray:
-    """Euclidean length of each column of a (3, N) array."""
-    return np.sqrt(dot(a, a))
-
-
-def normalize(a: np.ndarray) -> np.ndarray:
-    """Columns of a (3, N) array scaled to unit length."""
-    return a / norm(a)
 
 
 def orthonormal_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

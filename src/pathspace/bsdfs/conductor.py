@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..checks import triple
 from ..vecmath import Frame
 from .base import BSDFSample, Surface
 from .fresnel import fresnel_conductor
@@ -41,10 +42,8 @@ class Conductor:
     delta = False
 
     def __post_init__(self) -> None:
-        for name in ("eta", "k"):
-            v = np.asarray(getattr(self, name), dtype=np.float64)
-            if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(v < 0):
-                raise ValueError(f"{name}: expected 3 finite numbers >= 0, got {getattr(self, name)!r}")
+        triple(self.eta, "eta", low=0.0)
+        triple(self.k, "k", low=0.0)
         if not (ALPHA_RANGE[0] <= float(self.alpha) <= ALPHA_RANGE[1]):
             raise ValueError(f"alpha: expected a GGX roughness in [{ALPHA_RANGE[0]:g}, {ALPHA_RANGE[1]:g}], "
                              f"got {self.alpha!r}")

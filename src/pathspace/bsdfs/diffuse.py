@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import warp
+from ..checks import triple
 from .base import BSDFSample, Surface
 
 __all__ = ["Diffuse", "SAMPLING"]
@@ -36,9 +37,7 @@ class Diffuse:
     delta = False
 
     def __post_init__(self) -> None:
-        r = np.asarray(self.reflectance, dtype=np.float64)
-        if r.shape != (3,) or not np.all(np.isfinite(r)) or np.any(r < 0) or np.any(r > 1):
-            raise ValueError(f"reflectance: expected 3 numbers in [0, 1], got {self.reflectance!r}")
+        triple(self.reflectance, "reflectance", low=0.0, high=1.0)
 
     @staticmethod
     def tables(materials: list["Diffuse"]) -> dict[str, np.ndarray]:

@@ -9,6 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..checks import triple
 from .base import BSDFSample, Surface, reflect
 
 __all__ = ["Mirror"]
@@ -28,9 +29,7 @@ class Mirror:
     delta = True
 
     def __post_init__(self) -> None:
-        r = np.asarray(self.reflectance, dtype=np.float64)
-        if r.shape != (3,) or not np.all(np.isfinite(r)) or np.any(r < 0) or np.any(r > 1):
-            raise ValueError(f"reflectance: expected 3 numbers in [0, 1], got {self.reflectance!r}")
+        triple(self.reflectance, "reflectance", low=0.0, high=1.0)
 
     @staticmethod
     def tables(materials: list["Mirror"]) -> dict[str, np.ndarray]:

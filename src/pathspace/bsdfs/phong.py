@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import warp
+from ..checks import triple
 from ..vecmath import Frame
 from .base import BSDFSample, Surface, reflect
 
@@ -40,11 +41,8 @@ class Phong:
     delta = False
 
     def __post_init__(self) -> None:
-        kd = np.asarray(self.diffuse, dtype=np.float64)
-        ks = np.asarray(self.specular, dtype=np.float64)
-        for name, v in (("diffuse", kd), ("specular", ks)):
-            if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(v < 0):
-                raise ValueError(f"{name}: expected 3 numbers >= 0, got {v.tolist()}")
+        kd = triple(self.diffuse, "diffuse", low=0.0)
+        ks = triple(self.specular, "specular", low=0.0)
         if np.any(kd + ks > 1.0 + 1e-12):
             raise ValueError(f"specular: diffuse + specular must not exceed 1 per channel (energy conservation), "
                              f"got {(kd + ks).tolist()}")

@@ -12,15 +12,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..checks import triple
+
 __all__ = ["PointLight", "SpotLight", "DirectionalLight"]
-
-
-def _vec3(value, name: str, positive: bool = False) -> np.ndarray:
-    v = np.asarray(value, dtype=np.float64)
-    if v.shape != (3,) or not np.all(np.isfinite(v)) or (positive and (np.any(v < 0) or not np.any(v > 0))):
-        expected = "3 finite numbers >= 0, at least one > 0" if positive else "3 finite numbers"
-        raise ValueError(f"{name}: expected {expected}, got {value!r}")
-    return v
 
 
 @dataclass(frozen=True)
@@ -32,8 +26,8 @@ class PointLight:
     kind = "point"
 
     def __post_init__(self) -> None:
-        _vec3(self.position, "position")
-        _vec3(self.intensity, "intensity", positive=True)
+        triple(self.position, "position")
+        triple(self.intensity, "intensity", low=0.0, some_positive=True)
 
     @property
     def power(self) -> float:
@@ -59,10 +53,10 @@ class SpotLight:
     kind = "spot"
 
     def __post_init__(self) -> None:
-        p = _vec3(self.position, "position")
-        if np.linalg.norm(_vec3(self.look_at, "look_at") - p) == 0:
+        p = triple(self.position, "position")
+        if np.linalg.norm(triple(self.look_at, "look_at") - p) == 0:
             raise ValueError("look_at: must differ from position")
-        _vec3(self.intensity, "intensity", positive=True)
+        triple(self.intensity, "intensity", low=0.0, some_positive=True)
         if not (0 < self.cone_angle <= 90 and 0 <= self.falloff_start <= self.cone_angle):
             raise ValueError(f"cone_angle, falloff_start: expected 0 < falloff_start <= cone_angle <= 90 degrees, "
                              f"got {self.falloff_start}, {self.cone_angle}")
@@ -95,9 +89,9 @@ class DirectionalLight:
     kind = "directional"
 
     def __post_init__(self) -> None:
-        if np.linalg.norm(_vec3(self.direction, "direction")) == 0:
+        if np.linalg.norm(triple(self.direction, "direction")) == 0:
             raise ValueError("direction: must not be the zero vector")
-        _vec3(self.irradiance, "irradiance", positive=True)
+        triple(self.irradiance, "irradiance", low=0.0, some_positive=True)
 
     @property
     def unit_direction(self) -> np.ndarray:

@@ -10,6 +10,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..checks import triple
+
 __all__ = ["Environment"]
 
 
@@ -21,9 +23,7 @@ class Environment:
     kind = "environment"
 
     def __post_init__(self) -> None:
-        v = np.asarray(self.radiance, dtype=np.float64)
-        if v.shape != (3,) or not np.all(np.isfinite(v)) or np.any(v < 0) or not np.any(v > 0):
-            raise ValueError(f"radiance: expected 3 finite numbers >= 0, at least one > 0, got {self.radiance!r}")
+        triple(self.radiance, "radiance", low=0.0, some_positive=True)
 
     def power(self, scene_radius: float) -> float:
         return 4.0 * np.pi * np.pi * scene_radius ** 2 * float(np.mean(self.radiance))
