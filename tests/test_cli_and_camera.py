@@ -27,7 +27,7 @@ def test_render_and_compare(tmp_path):
     out = tmp_path / "out" / "a.exr"
     done = run_cli("render", scene, "--spp", 4, "--seed", 3, "-o", out, "-q", "-p", "max_depth=3")
     assert done.returncode == 0, done.stderr
-    assert "pt: 4 spp at 32x32" in done.stdout and "M samples/s" in done.stdout
+    assert "pt (rgb): 4 spp at 32x32" in done.stdout and "M samples/s" in done.stdout
     assert out.exists() and out.with_suffix(".png").exists()
     image, variance, meta = read_exr(out)
     assert image.shape == (32, 32, 3) and variance.shape == (32, 32, 3)

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 import pathspace as ps
-from pathspace.colours import RGBColours
+from pathspace.spectra import RGBColours
 from pathspace.validate import chi2_test_directions
 from conftest import cornell_dict
 

@@ -48,6 +48,13 @@ def _build_parser() -> argparse.ArgumentParser:
     r.add_argument("--threads", type=int, default=None, help="worker threads (default: all cores)")
     r.add_argument("-p", "--param", action="append", type=_parse_param, default=[], metavar="KEY=VALUE",
                    help="estimator parameter, repeatable (e.g. -p max_depth=5 -p rr=off)")
+    colour = r.add_mutually_exclusive_group()
+    colour.add_argument("--spectral", dest="spectral", action="store_true", default=None,
+                        help="render spectrally (default: when the scene has spectra or dispersion)")
+    colour.add_argument("--rgb", dest="spectral", action="store_false", help="render in RGB")
+    r.add_argument("--wavelengths", default="uniform", choices=("uniform", "visible"),
+                   help="wavelength sampling of spectral renders (default uniform)")
+    r.add_argument("--xyz", action="store_true", help="also write CIE XYZ (spectral renders) as an EXR layer")
     r.add_argument("-o", "--output", default="render.exr", help="output EXR path (default render.exr)")
     r.add_argument("--exposure", type=float, default=0.0, help="PNG exposure in stops (default 0)")
     r.add_argument("--no-png", action="store_true", help="do not write the PNG")
@@ -69,17 +76,18 @@ def _render(args) -> int:
     scene = load_scene(args.scene)
     params = dict(args.param)
     result = render(scene, args.estimator, spp=args.spp, time=args.time, seed=args.seed, threads=args.threads,
-                    progress=not args.quiet, **params)
+                    progress=not args.quiet, spectral=args.spectral, wavelength_sampling=args.wavelengths, **params)
     out = Path(args.output)
     if out.suffix.lower() != ".exr":
         out = out.with_suffix(".exr")
     metadata = {k: v for k, v in result.stats.items() if k != "plan"}
-    write_exr(out, result.image, result.variance, metadata)
+    write_exr(out, result.image, result.variance, metadata, xyz=result.xyz if args.xyz else None)
     written = [str(out)]
     if not args.no_png:
         png = out.with_suffix(".png")
         write_png(png, result.image, exposure=args.exposure)
         written.append(str(png))
+    print(f"colour: {result.stats['mode']} ({result.stats['mode_reason']})")
     for line in result.stats["plan"]:
         print(f"plan: {line}")
     print(result.summary())
@@ -102,6 +110,8 @@ def _compare(args) -> int:
 def _info(args) -> int:
     scene = load_scene(args.scene)
     print(scene.describe())
+    reasons = scene.spectral_reasons()
+    print(f"colour: {'spectral (' + '; '.join(reasons) + ')' if reasons else 'rgb (every colour is RGB)'}")
     for line in make_integrator(args.estimator, **dict(args.param)).plan(scene):
         print(f"plan: {line}")
     return 0

@@ -23,6 +23,7 @@ from . import _native
 from .film import Film
 from .integrators import WorkItem, make_integrator, work_layout
 from .scene import Scene, load_scene
+from .spectra import RGBMode, SpectralMode
 
 __all__ = ["render", "RenderResult"]
 
@@ -49,21 +50,23 @@ class RenderResult:
 
     Attributes
     ----------
-    image : (height, width, 3) float64, the per-pixel mean (linear RGB radiance)
+    image : (height, width, 3) float64, the per-pixel mean in linear sRGB
     variance : (height, width, 3) float64, estimated variance of that mean
-    stats : estimator, parameters, spp, seconds, samples per second, rays, non-finite samples, ...
-    film : the film with the raw sums (for merging or further passes)
+    stats : estimator, parameters, colour mode and why, spp, seconds, samples per second, rays, ...
+    film : the film with the raw sums (RGB, or XYZ for spectral renders) for merging or further passes
+    xyz : (height, width, 3) CIE XYZ of a spectral render (None for RGB renders)
     """
 
     image: np.ndarray
     variance: np.ndarray
     stats: dict[str, Any]
     film: Film = field(repr=False)
+    xyz: np.ndarray | None = field(default=None, repr=False)
 
     def summary(self) -> str:
         """One line: estimator, spp, time and throughput."""
         s = self.stats
-        text = (f"{s['estimator']}: {s['spp']} spp at {s['width']}x{s['height']} in {s['seconds']:.2f} s "
+        text = (f"{s['estimator']} ({s['mode']}): {s['spp']} spp at {s['width']}x{s['height']} in {s['seconds']:.2f} s "
                 f"({s['samples_per_second'] / 1e6:.3f} M samples/s, {s['rays_per_second'] / 1e6:.2f} M rays/s, "
                 f"{s['threads']} threads)")
         if s["nonfinite"]:
@@ -96,7 +99,8 @@ def _groups(passes: Iterator[int], size: int) -> Iterator[list[int]]:
 
 def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int | None = None,
            time: float | None = None, seed: int = 0, threads: int | None = None, progress: bool = False,
-           first_pass: int = 0, **params: Any) -> RenderResult:
+           first_pass: int = 0, spectral: bool | None = None, wavelength_sampling: str = "uniform",
+           **params: Any) -> RenderResult:
     """Render ``scene`` with the named estimator.
 
     Parameters
@@ -112,6 +116,10 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
     first_pass : index of the first pass; renders of disjoint pass ranges with
         the same seed are independent and their films add up (:meth:`Film.merge`)
         to the render of the union
+    spectral : render spectrally (True), in RGB (False), or as the scene needs
+        (None: spectral when it has measured spectra or dispersion)
+    wavelength_sampling : "uniform" or "visible" (importance sampling of the
+        visible range), for spectral renders
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
@@ -133,9 +141,10 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
 
     integrator = make_integrator(estimator, **params)
     integrator.check(scene)
+    mode, mode_reason = _colour_mode(scene, spectral, wavelength_sampling)
     _tune_allocator()
     camera = scene.camera
-    film = Film(camera.width, camera.height)
+    film = Film(camera.width, camera.height, covariance=mode.film_covariance)
     scene.accel  # build the BVH before the clock starts
     start = _time.perf_counter()
     deadline = None if time is None else start + time
@@ -165,7 +174,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
 
     def work(k: int) -> None:
         try:
-            for item, values in integrator.render_stream(scene, next_item, seed, counters[k]):
+            for item, values in integrator.render_stream(scene, next_item, seed, mode, counters[k]):
                 with done:
                     results[item.index] = (item, values)
                     done.notify()
@@ -223,11 +232,28 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
         "samples_per_second": samples / seconds,
         "rays": rays,
         "rays_per_second": rays / seconds,
+        "mode": mode.name,
+        "mode_reason": mode_reason,
         "nonfinite": film.nonfinite,
         "truncated": truncated,
         "scene": scene.source,
     }
-    return RenderResult(image=film.mean(), variance=film.variance(), stats=stats, film=film)
+    matrix = mode.film_to_srgb
+    return RenderResult(image=film.mean(matrix), variance=film.variance(matrix), stats=stats, film=film,
+                        xyz=film.mean() if mode.name == "spectral" else None)
+
+
+def _colour_mode(scene: Scene, spectral: bool | None, wavelength_sampling: str):
+    """The colour mode of a render and the reason for it."""
+    reasons = scene.spectral_reasons()
+    if spectral is None:
+        spectral = bool(reasons)
+        reason = "; ".join(reasons) if reasons else "every colour in the scene is RGB and nothing disperses"
+    else:
+        reason = "asked for" + (f" ({'; '.join(reasons)})" if reasons and not spectral else "")
+        if reasons and not spectral:
+            reason += ": spectra are reduced to RGB, dispersion uses the index at 550 nm"
+    return (SpectralMode(wavelength_sampling) if spectral else RGBMode()), reason
 
 
 def _progress_bar(enabled: bool, total: int | None, estimator: str):

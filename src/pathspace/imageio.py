@@ -1,9 +1,10 @@
 """Reading and writing images: OpenEXR for data, PNG for looking at.
 
 EXR files are float32 (OpenEXR does not store float64): the image as the
-``RGB`` layer, its per-pixel variance (of the mean) as the ``variance`` layer
-(channels ``variance.R/G/B``), and render metadata as string attributes of
-the header, prefixed ``pathspace.``.  PNGs are 8-bit sRGB after an exposure
+``RGB`` layer (linear sRGB), its per-pixel variance (of the mean) as the
+``variance`` layer (channels ``variance.R/G/B``), for spectral renders
+optionally CIE XYZ as the ``xyz`` layer (``xyz.X/Y/Z``), and render metadata
+as string attributes of the header, prefixed ``pathspace.``.  PNGs are 8-bit sRGB after an exposure
 scale, with the sRGB transfer function from colour-science.
 """
 from __future__ import annotations
@@ -28,8 +29,8 @@ def _check_image(image: np.ndarray, name: str) -> np.ndarray:
 
 
 def write_exr(path: str | os.PathLike, image: np.ndarray, variance: np.ndarray | None = None,
-              metadata: dict[str, Any] | None = None) -> None:
-    """Write an (H, W, 3) image, optionally its variance, and metadata to an OpenEXR file (float32, ZIP)."""
+              metadata: dict[str, Any] | None = None, xyz: np.ndarray | None = None) -> None:
+    """Write an (H, W, 3) image, optionally its variance, CIE XYZ and metadata to an OpenEXR file (float32, ZIP)."""
     import OpenEXR
 
     image = _check_image(image, "image")
@@ -41,6 +42,10 @@ def write_exr(path: str | os.PathLike, image: np.ndarray, variance: np.ndarray |
         # Pixels with fewer than two samples have no variance estimate (inf); store them as inf too.
         for c, name in enumerate("RGB"):
             channels[f"variance.{name}"] = np.ascontiguousarray(variance[:, :, c], dtype=np.float32)
+    if xyz is not None:
+        xyz = _check_image(xyz, "xyz")
+        for c, name in enumerate("XYZ"):
+            channels[f"xyz.{name}"] = np.ascontiguousarray(xyz[:, :, c], dtype=np.float32)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for key, value in (metadata or {}).items():
         header[METADATA_PREFIX + key] = value if isinstance(value, str) else json.dumps(value, default=str)

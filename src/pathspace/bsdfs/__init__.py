@@ -90,7 +90,8 @@ class MaterialLanes:
             for k in range(len(table.kinds)):
                 idx = np.flatnonzero(kind == k)
                 if idx.size:
-                    self.groups.append((table.kinds[k], idx, table.gather(k, material_ids.take(idx), colours, options)))
+                    self.groups.append((table.kinds[k], idx, table.gather(k, material_ids.take(idx), colours.take(idx),
+                                                                          options)))
         self.delta = table.delta.take(material_ids) if table.delta.any() else None
 
     def eval(self, surface: Surface, wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

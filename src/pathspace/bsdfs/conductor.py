@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..checks import triple
+from ..spectra import Colour, ColourTable, check_colour
 from ..vecmath import Frame
 from .base import BSDFSample, Surface
 from .fresnel import fresnel_conductor
@@ -33,30 +33,30 @@ class ConductorParams:
 
 @dataclass(frozen=True)
 class Conductor:
-    """GGX conductor with RGB complex index ``eta`` + i ``k`` and roughness ``alpha``."""
+    """GGX conductor with complex index ``eta`` + i ``k`` (RGB triples or spectra) and roughness ``alpha``."""
 
-    eta: tuple[float, float, float]
-    k: tuple[float, float, float]
+    eta: Colour
+    k: Colour
     alpha: float
     kind = "conductor"
     delta = False
 
     def __post_init__(self) -> None:
-        triple(self.eta, "eta", low=0.0)
-        triple(self.k, "k", low=0.0)
+        for name in ("eta", "k"):
+            object.__setattr__(self, name, check_colour(getattr(self, name), name, "unbounded"))
         if not (ALPHA_RANGE[0] <= float(self.alpha) <= ALPHA_RANGE[1]):
             raise ValueError(f"alpha: expected a GGX roughness in [{ALPHA_RANGE[0]:g}, {ALPHA_RANGE[1]:g}], "
                              f"got {self.alpha!r}")
 
     @staticmethod
-    def tables(materials: list["Conductor"]) -> dict[str, np.ndarray]:
-        return {"eta": np.array([m.eta for m in materials], dtype=np.float64).T.copy(),
-                "k": np.array([m.k for m in materials], dtype=np.float64).T.copy(),
+    def tables(materials: list["Conductor"]) -> dict:
+        return {"eta": ColourTable([m.eta for m in materials], "unbounded"),
+                "k": ColourTable([m.k for m in materials], "unbounded"),
                 "alpha": np.array([m.alpha for m in materials], dtype=np.float64)}
 
     @staticmethod
     def gather(tables, ids, colours, options) -> ConductorParams:
-        return ConductorParams(colours.lookup_unbounded(tables["eta"], ids), colours.lookup_unbounded(tables["k"], ids),
+        return ConductorParams(colours.lookup(tables["eta"], ids), colours.lookup(tables["k"], ids),
                                tables["alpha"].take(ids))
 
     @staticmethod

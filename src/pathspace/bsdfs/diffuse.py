@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import warp
-from ..checks import triple
+from ..spectra import Colour, ColourTable, check_colour
 from .base import BSDFSample, Surface
 
 __all__ = ["Diffuse", "SAMPLING"]
@@ -30,19 +30,19 @@ class DiffuseParams:
 
 @dataclass(frozen=True)
 class Diffuse:
-    """Lambertian reflector with RGB albedo ``reflectance`` in [0, 1]."""
+    """Lambertian reflector with albedo ``reflectance`` (RGB in [0, 1], or a spectrum <= 1)."""
 
-    reflectance: tuple[float, float, float]
+    reflectance: Colour
     kind = "diffuse"
     delta = False
 
     def __post_init__(self) -> None:
-        triple(self.reflectance, "reflectance", low=0.0, high=1.0)
+        object.__setattr__(self, "reflectance", check_colour(self.reflectance, "reflectance", "reflectance"))
 
     @staticmethod
-    def tables(materials: list["Diffuse"]) -> dict[str, np.ndarray]:
+    def tables(materials: list["Diffuse"]) -> dict:
         """Parameter tables over the given materials."""
-        return {"reflectance": np.array([m.reflectance for m in materials], dtype=np.float64).T.copy()}
+        return {"reflectance": ColourTable([m.reflectance for m in materials], "reflectance")}
 
     @staticmethod
     def gather(tables, ids: np.ndarray, colours, options) -> DiffuseParams:

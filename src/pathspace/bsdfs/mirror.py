@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..checks import triple
+from ..spectra import Colour, ColourTable, check_colour
 from .base import BSDFSample, Surface, reflect
 
 __all__ = ["Mirror"]
@@ -22,18 +22,18 @@ class MirrorParams:
 
 @dataclass(frozen=True)
 class Mirror:
-    """Delta mirror with RGB ``reflectance`` in [0, 1]."""
+    """Delta mirror with ``reflectance`` (RGB in [0, 1], or a spectrum <= 1)."""
 
-    reflectance: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    reflectance: Colour = (1.0, 1.0, 1.0)
     kind = "mirror"
     delta = True
 
     def __post_init__(self) -> None:
-        triple(self.reflectance, "reflectance", low=0.0, high=1.0)
+        object.__setattr__(self, "reflectance", check_colour(self.reflectance, "reflectance", "reflectance"))
 
     @staticmethod
-    def tables(materials: list["Mirror"]) -> dict[str, np.ndarray]:
-        return {"reflectance": np.array([m.reflectance for m in materials], dtype=np.float64).T.copy()}
+    def tables(materials: list["Mirror"]) -> dict:
+        return {"reflectance": ColourTable([m.reflectance for m in materials], "reflectance")}
 
     @staticmethod
     def gather(tables, ids, colours, options) -> MirrorParams:

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import warp
-from ..checks import triple
+from ..spectra import Colour, ColourTable, check_colour
 from ..vecmath import Frame
 from .base import BSDFSample, Surface, reflect
 
@@ -34,27 +34,32 @@ class PhongParams:
 class Phong:
     """Diffuse ``diffuse`` plus glossy ``specular`` (RGB, sum <= 1 per channel) with Phong ``exponent``."""
 
-    diffuse: tuple[float, float, float]
-    specular: tuple[float, float, float]
+    diffuse: Colour
+    specular: Colour
     exponent: float
     kind = "phong"
     delta = False
 
     def __post_init__(self) -> None:
-        kd = triple(self.diffuse, "diffuse", low=0.0)
-        ks = triple(self.specular, "specular", low=0.0)
-        if np.any(kd + ks > 1.0 + 1e-12):
+        for name in ("diffuse", "specular"):
+            object.__setattr__(self, name, check_colour(getattr(self, name), name, "reflectance"))
+        table_d = ColourTable([self.diffuse], "reflectance")
+        table_s = ColourTable([self.specular], "reflectance")
+        kd, ks = table_d.rgb[:, 0], table_s.rgb[:, 0]
+        if table_d.spectral or table_s.spectral:
+            kd, ks = table_d.spectra[0], table_s.spectra[0]
+        if np.any(kd + ks > 1.0 + 1e-6):
             raise ValueError(f"specular: diffuse + specular must not exceed 1 per channel (energy conservation), "
                              f"got {(kd + ks).tolist()}")
         if not (np.isfinite(self.exponent) and self.exponent >= 0):
             raise ValueError(f"exponent: expected a number >= 0, got {self.exponent!r}")
 
     @staticmethod
-    def tables(materials: list["Phong"]) -> dict[str, np.ndarray]:
-        kd = np.array([m.diffuse for m in materials], dtype=np.float64).T.copy()
-        ks = np.array([m.specular for m in materials], dtype=np.float64).T.copy()
-        total = kd.mean(axis=0) + ks.mean(axis=0)
-        glossy = np.divide(ks.mean(axis=0), total, out=np.zeros_like(total), where=total > 0)
+    def tables(materials: list["Phong"]) -> dict:
+        kd = ColourTable([m.diffuse for m in materials], "reflectance")
+        ks = ColourTable([m.specular for m in materials], "reflectance")
+        total = kd.mean() + ks.mean()
+        glossy = np.divide(ks.mean(), total, out=np.zeros_like(total), where=total > 0)
         return {"kd": kd, "ks": ks, "exponent": np.array([m.exponent for m in materials], dtype=np.float64),
                 "glossy_prob": glossy}
 

@@ -51,7 +51,6 @@ from typing import Iterator
 import numpy as np
 
 from ..bsdfs import DIFFUSE_SAMPLING, MaterialLanes, Surface
-from ..colours import RGBColours
 from ..lights import MEASURES, SELECTIONS
 from ..mis import HEURISTICS, mis_weight
 from ..roulette import RussianRoulette
@@ -140,44 +139,49 @@ class PathTracer:
 
     # -- rendering ---------------------------------------------------------------------------------
 
-    def render_stream(self, scene, next_item, seed: int, counters: dict) -> Iterator[tuple[WorkItem, np.ndarray]]:
+    def render_stream(self, scene, next_item, seed: int, mode, counters: dict) -> Iterator[tuple[WorkItem, np.ndarray]]:
         """Render work items taken from ``next_item()`` (None when there are no more) on one wavefront.
 
-        Yields (item, values (C, n)) as items finish: ``values[:, k]`` is the
-        sample of pixel ``item.pixels[k]``.  New items join whenever fewer than
-        ``REFILL`` paths are alive.  Adds ray and truncation counts to ``counters``.
+        Yields (item, values (3, n)) as items finish: ``values[:, k]`` is the
+        sample of pixel ``item.pixels[k]``, in RGB or XYZ as the colour
+        ``mode`` says.  New items join whenever fewer than ``REFILL`` paths
+        are alive.  Adds ray and truncation counts to ``counters``.
         """
-        colours = RGBColours
-        mesh, lights, accel, table = scene.mesh, scene.lights, scene.accel, scene.materials
+        lights = scene.lights
         eps = np.float32(scene.ray_offset)
         options = {"diffuse_sampling": self.diffuse_sampling}
         strategy = self.light_sampling if lights.count else "none"
         env = lights.environment is not None
-        book = ItemBook(colours.channels)
+        book = ItemBook(3)
         sampler = StreamSampler(seed)
-        paths = Lanes(PATH_FIELDS, **_new_paths(colours.channels, np.zeros(0, np.int64),
-                                                 np.zeros((3, 0), np.float32), np.zeros((3, 0), np.float32)))
+        fields = PATH_FIELDS + mode.path_fields
+        paths = None
         exhausted = False
         while True:
-            while not exhausted and paths.size < REFILL:
+            while not exhausted and (paths is None or paths.size < REFILL):
                 item = next_item()
                 if item is None:
                     exhausted = True
                     break
                 tickets = book.open(item)
-                u = sampler.add(item.keys, item.counts, CAMERA_DIMS)
+                u = sampler.add(item.keys, item.counts, CAMERA_DIMS + mode.camera_dims)
                 origin, direction = scene.camera.generate_rays(item.pixels, u[0:2], u[2:4])
-                paths.extend(Lanes(PATH_FIELDS, **_new_paths(colours.channels, tickets, np.asarray(origin),
-                                                              direction)))
-            if not paths.size:
+                new = Lanes(fields, **_new_paths(mode.channels, tickets, np.asarray(origin), direction),
+                            **mode.start(u[CAMERA_DIMS:]))
+                if paths is None:
+                    paths = new
+                else:
+                    paths.extend(new)
+            if paths is None or not paths.size:
                 break
-            counters["rays"] += self._bounce(scene, paths, sampler, book, strategy, env, eps, colours, options,
+            counters["rays"] += self._bounce(scene, paths, sampler, book, strategy, env, eps, mode, options,
                                              counters)
             yield from book.finished()
 
-    def _bounce(self, scene, paths, sampler, book, strategy, env, eps, colours, options, counters) -> int:
+    def _bounce(self, scene, paths, sampler, book, strategy, env, eps, mode, options, counters) -> int:
         """Advance every path by one segment: trace, gather emission, sample lights and the BSDF, roulette."""
         mesh, lights, table = scene.mesh, scene.lights, scene.materials
+        colours = mode.colours(paths)
         paths.depth += 1
         hits = scene.accel.intersect(paths.origin, paths.direction, normals=False, threads=1)
         rays = paths.size
@@ -189,12 +193,13 @@ class PathTracer:
         end = ~hit
         if not hit.all():
             alive = np.flatnonzero(hit)
-            _retire(book, paths, end)
+            _retire(book, paths, end, mode)
             paths.keep(alive, stale=("origin",))  # every surviving path gets a new origin below
             sampler.keep(alive)
             prim, b1, b2 = prim.take(alive), b1.take(alive), b2.take(alive)
             if not paths.size:
                 return rays
+            colours = mode.colours(paths)
         p, normal = mesh.hit_geometry(prim, b1, b2)
         cos_o = -dot(normal, paths.direction)
         if lights.area.count:
@@ -203,13 +208,14 @@ class PathTracer:
         if stop.any():
             counters["truncated"] += int(np.count_nonzero(stop & (paths.depth >= SAFETY_DEPTH)))
             alive = np.flatnonzero(~stop)
-            _retire(book, paths, stop)
+            _retire(book, paths, stop, mode)
             paths.keep(alive, stale=("origin",))
             sampler.keep(alive)
             prim, p, normal, cos_o = prim.take(alive), np.take(p, alive, axis=1), np.take(normal, alive, axis=1), \
                 cos_o.take(alive)
             if not paths.size:
                 return rays
+            colours = mode.colours(paths)
         surface = Surface.facing(normal, paths.direction, cos_o)
 
         u = sampler.draw(DIMS_PER_BOUNCE + (strategy == "mixture"))
@@ -237,7 +243,7 @@ class PathTracer:
             np.divide(paths.beta, survival, out=paths.beta, where=survival > 0)
         if not keep.all():
             live = np.flatnonzero(keep)
-            _retire(book, paths, ~keep)
+            _retire(book, paths, ~keep, mode)
             paths.keep(live)
             sampler.keep(live)
         return rays
@@ -258,7 +264,7 @@ class PathTracer:
         emits = np.flatnonzero(emitter >= 0)
         if not emits.size:
             return
-        le = lights.area.emitted(emitter.take(emits), cos_o.take(emits), colours)
+        le = lights.area.emitted(emitter.take(emits), cos_o.take(emits), colours.take(emits))
         if strategy == "mis":
             pdf_light = lights.pdf_hit(prim.take(emits), np.take(paths.prev_p, emits, axis=1),
                                        np.take(p, emits, axis=1), self.light_selection, self.light_measure)
@@ -270,7 +276,7 @@ class PathTracer:
     def _escape(self, scene, escaped, paths, strategy, colours):
         """Add environment radiance to rays that left the scene."""
         lanes = np.flatnonzero(escaped)
-        env = scene.lights.environment_radiance(lanes.size, colours)
+        env = scene.lights.environment_radiance(lanes.size, colours.take(lanes))
         pdf_env = np.full(lanes.size, scene.lights.pdf_environment(self.light_selection))
         env = env * self._weight_of_hits(paths.pdf_prev.take(lanes), pdf_env, paths.delta_prev.take(lanes), strategy)
         paths.radiance[:, lanes] += np.take(paths.beta, lanes, axis=1) * env
@@ -378,8 +384,8 @@ def _new_paths(channels: int, tickets: np.ndarray, origin: np.ndarray, direction
                 delta_prev=np.ones(n, dtype=bool))       # the previous vertex was the camera or a delta lobe
 
 
-def _retire(book: ItemBook, paths: Lanes, done: np.ndarray) -> None:
-    """Hand the radiance of the paths that end here (``done``) to their items."""
+def _retire(book: ItemBook, paths: Lanes, done: np.ndarray, mode) -> None:
+    """Hand the radiance of the paths that end here (``done``), as film values, to their items."""
     lanes = np.flatnonzero(done)
     if lanes.size:
-        book.store(paths.ticket.take(lanes), np.take(paths.radiance, lanes, axis=1))
+        book.store(paths.ticket.take(lanes), mode.to_film(np.take(paths.radiance, lanes, axis=1), paths, lanes))

@@ -18,8 +18,9 @@ from functools import cached_property
 
 import numpy as np
 
-from ..vecmath import dot
 from .. import warp
+from ..spectra import ColourTable
+from ..vecmath import dot
 from .area import MEASURES, AreaLights
 from .delta import DirectionalLight, PointLight, SpotLight
 from .environment import Environment
@@ -60,6 +61,7 @@ class LightSet:
         if len(environments) > 1:
             raise ValueError("at most one environment light is supported")
         self.environment = environments[0] if environments else None
+        self.others = list(others)
         self.scene_radius = float(scene_radius)
         kinds = [np.full(area.count, AREA)]
         index = [np.arange(area.count)]
@@ -79,11 +81,10 @@ class LightSet:
         others_ids = area.light_count + np.arange(self.kind.size - area.count)
         _, area_ids = np.unique(area.light_of, return_inverse=True)
         self.light_id = np.concatenate([area_ids.ravel(), others_ids]).astype(np.int64)
-        self.point_position = np.array([l.position for l in self.points], dtype=np.float64).reshape(-1, 3).T
-        self.point_intensity = np.array([l.intensity for l in self.points], dtype=np.float64).reshape(-1, 3).T
-        self.spot_intensity = np.array([l.intensity for l in self.spots], dtype=np.float64).reshape(-1, 3).T
-        self.directional_irradiance = np.array([l.irradiance for l in self.directionals],
-                                               dtype=np.float64).reshape(-1, 3).T
+        self.point_intensity = ColourTable([l.intensity for l in self.points], "illuminant")
+        self.spot_intensity = ColourTable([l.intensity for l in self.spots], "illuminant")
+        self.directional_irradiance = ColourTable([l.irradiance for l in self.directionals], "illuminant")
+        self.environment_table = ColourTable([self.environment.radiance] if self.environment else [], "illuminant")
 
     @property
     def count(self) -> int:
@@ -151,16 +152,16 @@ class LightSet:
         for k in np.unique(kind):
             lanes = np.flatnonzero(kind == k)
             idx, ref, uu = self.index.take(entity.take(lanes)), np.take(receivers, lanes, axis=1), u[1:3, lanes]
+            mine = colours.take(lanes)
             if k == AREA:
-                s = self._sample_area(idx, ref, uu, pmf.take(lanes), colours, measure)
+                s = self._sample_area(idx, ref, uu, pmf.take(lanes), mine, measure)
                 wi[:, lanes], distance[lanes], point[:, lanes], normal[:, lanes] = s.wi, s.distance, s.point, s.normal
                 value[:, lanes], facing[lanes], pdf[lanes], cos_light[lanes] = s.value, s.facing, s.pdf, s.cos_light
                 continue
             if k == ENVIRONMENT:
                 d = warp.square_to_uniform_sphere(uu)
                 wi[:, lanes] = d
-                value[:, lanes] = colours.lookup_unbounded(np.asarray(self.environment.radiance)[:, None],
-                                                           np.zeros(lanes.size, dtype=np.int64))
+                value[:, lanes] = mine.lookup(self.environment_table, np.zeros(lanes.size, dtype=np.int64))
                 pdf[lanes] = pmf.take(lanes) * warp.INV_FOUR_PI
                 continue
             delta[lanes] = True
@@ -168,7 +169,7 @@ class LightSet:
             if k == DIRECTIONAL:
                 travel = np.array([l.unit_direction for l in self.directionals]).T.take(idx, axis=1)
                 wi[:, lanes] = -travel
-                value[:, lanes] = colours.lookup_unbounded(self.directional_irradiance, idx)
+                value[:, lanes] = mine.lookup(self.directional_irradiance, idx)
                 continue
             lights = self.points if k == POINT else self.spots
             position = np.array([l.position for l in lights], dtype=np.float64).T.take(idx, axis=1)
@@ -180,18 +181,18 @@ class LightSet:
             falloff = np.ones(lanes.size)
             if k == SPOT:
                 for j in np.unique(idx):
-                    mine = idx == j
-                    falloff[mine] = self.spots[j].falloff(-direction[:, mine])
+                    this_spot = idx == j
+                    falloff[this_spot] = self.spots[j].falloff(-direction[:, this_spot])
             wi[:, lanes] = direction
             distance[lanes] = dist
             point[:, lanes] = position
-            value[:, lanes] = colours.lookup_unbounded(intensity, idx) * (falloff / dist2)
+            value[:, lanes] = mine.lookup(intensity, idx) * (falloff / dist2)
         return LightSample(wi, distance, point, normal, value, facing, pdf, delta, cos_light)
 
     def _sample_area(self, emitter, receivers, u, pmf, colours, measure) -> LightSample:
         point, normal, wi, distance, cos_light, pdf = self.area.sample(emitter, receivers, u, measure)
         facing = self.area.two_sided.take(emitter) | (cos_light > 0)
-        return LightSample(wi, distance, point, normal, colours.lookup_unbounded(self.area.radiance, emitter), facing,
+        return LightSample(wi, distance, point, normal, self.area.radiance_of(emitter, colours), facing,
                            pdf * pmf, np.zeros(pmf.shape, dtype=bool), cos_light)
 
     def pdf_hit(self, triangles: np.ndarray, receivers: np.ndarray, points: np.ndarray, selection: str = "power",
@@ -217,5 +218,4 @@ class LightSet:
         """Radiance (C, count) of the environment (zero if there is none)."""
         if self.environment is None:
             return np.zeros((colours.channels, count))
-        return colours.lookup_unbounded(np.asarray(self.environment.radiance, dtype=np.float64)[:, None],
-                                        np.zeros(count, dtype=np.int64))
+        return colours.lookup(self.environment_table, np.zeros(count, dtype=np.int64))

@@ -1,7 +1,8 @@
 """Area lights: emitting triangles of the scene mesh.
 
-Each emitting triangle has constant radiance Le on the side of its geometric
-normal (one-sided, the default) or on both sides.  Given a triangle, a point
+Each emitting triangle has the constant radiance Le of its light (an emitting
+shape) on the side of its geometric normal (one-sided, the default) or on
+both sides.  Given a triangle, a point
 is sampled either uniformly by area, with solid-angle density at a receiver
 
     p_sa = (1 / area) * dist^2 / |cos theta_light|          (Veach 1997, eq. 8.10)
@@ -16,6 +17,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..spectra import ColourTable
 from ..vecmath import dot
 from ..warp import square_to_uniform_triangle
 from .spherical_triangle import sample_spherical_triangle, solid_angle
@@ -36,24 +38,24 @@ class AreaLights:
     ----------
     mesh : the scene mesh
     triangles : (E,) indices of emitting triangles
-    radiance : (3, E) RGB radiance of each (W sr^-1 m^-2 per channel)
-    two_sided : (E,) whether each emits on both sides
     light_of : (E,) index of the light (emitting shape) each triangle belongs to
+    radiance : the radiance of each light (W sr^-1 m^-2, RGB or spectral), a ColourTable of "illuminant" kind
+    two_sided : (L,) whether each light emits on both sides
     """
 
-    def __init__(self, mesh: "TriangleMesh", triangles: np.ndarray, radiance: np.ndarray, two_sided: np.ndarray,
-                 light_of: np.ndarray) -> None:
+    def __init__(self, mesh: "TriangleMesh", triangles: np.ndarray, light_of: np.ndarray, radiance: ColourTable,
+                 two_sided: np.ndarray) -> None:
         self.mesh = mesh
         self.triangles = np.asarray(triangles, dtype=np.int64)
-        self.radiance = np.asarray(radiance, dtype=np.float64).reshape(3, -1)
-        self.two_sided = np.asarray(two_sided, dtype=bool)
         self.light_of = np.asarray(light_of, dtype=np.int64)
+        self.radiance = radiance
+        self.two_sided = np.asarray(two_sided, dtype=bool).take(self.light_of)
         self.area = mesh.area[self.triangles]
         self.emitter_of_triangle = np.full(mesh.triangle_count, -1, dtype=np.int64)
         self.emitter_of_triangle[self.triangles] = np.arange(self.triangles.size)
         self.table = np.take(mesh.table, self.triangles, axis=1)  # geometry rows of the emitting triangles
         # Emitted power of each triangle: pi * area * mean RGB radiance per emitting side.
-        self.power = np.pi * self.area * self.radiance.mean(axis=0) * np.where(self.two_sided, 2.0, 1.0)
+        self.power = np.pi * self.area * radiance.mean().take(self.light_of) * np.where(self.two_sided, 2.0, 1.0)
 
     @property
     def count(self) -> int:
@@ -119,10 +121,14 @@ class AreaLights:
                 pdf = np.where(_spherical(omega), 1.0 / omega, pdf)
         return pdf
 
+    def radiance_of(self, emitter: np.ndarray, colours) -> np.ndarray:
+        """Radiance (C, N) of emitting triangles ``emitter`` (on their emitting sides)."""
+        return colours.lookup(self.radiance, self.light_of.take(emitter))
+
     def emitted(self, emitter: np.ndarray, cos_light: np.ndarray, colours) -> np.ndarray:
         """Radiance (C, N) leaving triangles ``emitter`` toward viewers at dot(n, w_view) = ``cos_light``."""
         facing = self.two_sided.take(emitter) | (cos_light > 0)
-        return colours.lookup_unbounded(self.radiance, emitter) * facing
+        return self.radiance_of(emitter, colours) * facing
 
 
 def _spherical(omega: np.ndarray) -> np.ndarray:

@@ -13,6 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..checks import triple
+from ..spectra import Colour, check_emission, mean_rgb
 
 __all__ = ["PointLight", "SpotLight", "DirectionalLight"]
 
@@ -22,16 +23,16 @@ class PointLight:
     """Isotropic point light at ``position`` with RGB radiant intensity ``intensity`` (W/sr)."""
 
     position: tuple[float, float, float]
-    intensity: tuple[float, float, float]
+    intensity: Colour
     kind = "point"
 
     def __post_init__(self) -> None:
         triple(self.position, "position")
-        triple(self.intensity, "intensity", low=0.0, some_positive=True)
+        object.__setattr__(self, "intensity", check_emission(self.intensity, "intensity"))
 
     @property
     def power(self) -> float:
-        return 4.0 * np.pi * float(np.mean(self.intensity))
+        return 4.0 * np.pi * mean_rgb(self.intensity)
 
     def falloff(self, direction_from_light: np.ndarray) -> np.ndarray:
         return np.ones(direction_from_light.shape[1])
@@ -47,7 +48,7 @@ class SpotLight:
 
     position: tuple[float, float, float]
     look_at: tuple[float, float, float]
-    intensity: tuple[float, float, float]
+    intensity: Colour
     cone_angle: float = 30.0
     falloff_start: float = 25.0
     kind = "spot"
@@ -56,7 +57,7 @@ class SpotLight:
         p = triple(self.position, "position")
         if np.linalg.norm(triple(self.look_at, "look_at") - p) == 0:
             raise ValueError("look_at: must differ from position")
-        triple(self.intensity, "intensity", low=0.0, some_positive=True)
+        object.__setattr__(self, "intensity", check_emission(self.intensity, "intensity"))
         if not (0 < self.cone_angle <= 90 and 0 <= self.falloff_start <= self.cone_angle):
             raise ValueError(f"cone_angle, falloff_start: expected 0 < falloff_start <= cone_angle <= 90 degrees, "
                              f"got {self.falloff_start}, {self.cone_angle}")
@@ -69,7 +70,7 @@ class SpotLight:
     @property
     def power(self) -> float:
         cos_start, cos_end = np.cos(np.radians(self.falloff_start)), np.cos(np.radians(self.cone_angle))
-        return float(np.mean(self.intensity)) * 2.0 * np.pi * ((1.0 - cos_start) + (cos_start - cos_end) / 2.0)
+        return mean_rgb(self.intensity) * 2.0 * np.pi * ((1.0 - cos_start) + (cos_start - cos_end) / 2.0)
 
     def falloff(self, direction_from_light: np.ndarray) -> np.ndarray:
         cos = self.axis @ direction_from_light
@@ -85,13 +86,13 @@ class DirectionalLight:
     """Light arriving from infinitely far along ``direction`` (the way it travels) with irradiance ``irradiance``."""
 
     direction: tuple[float, float, float]
-    irradiance: tuple[float, float, float]
+    irradiance: Colour
     kind = "directional"
 
     def __post_init__(self) -> None:
         if np.linalg.norm(triple(self.direction, "direction")) == 0:
             raise ValueError("direction: must not be the zero vector")
-        triple(self.irradiance, "irradiance", low=0.0, some_positive=True)
+        object.__setattr__(self, "irradiance", check_emission(self.irradiance, "irradiance"))
 
     @property
     def unit_direction(self) -> np.ndarray:
@@ -99,4 +100,4 @@ class DirectionalLight:
         return d / np.linalg.norm(d)
 
     def power(self, scene_radius: float) -> float:
-        return np.pi * scene_radius ** 2 * float(np.mean(self.irradiance))
+        return np.pi * scene_radius ** 2 * mean_rgb(self.irradiance)

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..checks import triple
+from ..spectra import Colour, check_emission, mean_rgb
 
 __all__ = ["Environment"]
 
@@ -19,11 +19,11 @@ __all__ = ["Environment"]
 class Environment:
     """Constant environment light of RGB ``radiance``."""
 
-    radiance: tuple[float, float, float]
+    radiance: Colour
     kind = "environment"
 
     def __post_init__(self) -> None:
-        triple(self.radiance, "radiance", low=0.0, some_positive=True)
+        object.__setattr__(self, "radiance", check_emission(self.radiance, "radiance"))
 
     def power(self, scene_radius: float) -> float:
-        return 4.0 * np.pi * np.pi * scene_radius ** 2 * float(np.mean(self.radiance))
+        return 4.0 * np.pi * np.pi * scene_radius ** 2 * mean_rgb(self.radiance)

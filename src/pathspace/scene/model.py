@@ -59,6 +59,23 @@ class Scene:
         triangles = self.mesh.indices[self.lights.area.triangles]
         return Accel(self.mesh.vertices.astype(np.float32), np.ascontiguousarray(triangles))
 
+    def spectral_reasons(self) -> list[str]:
+        """Why this scene needs spectral rendering (empty: RGB suffices)."""
+        from ..bsdfs import Dielectric
+        from ..spectra import is_spectral
+
+        reasons = []
+        for name, material in zip(self.materials.names, self.materials.materials):
+            if isinstance(material, Dielectric) and material.dispersive:
+                reasons.append(f"material {name!r} is dispersive")
+            elif any(is_spectral(v) for v in vars(material).values()):
+                reasons.append(f"material {name!r} has spectral data")
+        if self.lights.area.radiance.spectral:
+            reasons.append("an area light emits a spectrum")
+        if any(is_spectral(v) for light in self.lights.others for v in vars(light).values()):
+            reasons.append("a light emits a spectrum")
+        return reasons
+
     def describe(self) -> str:
         """A short human-readable summary."""
         lo, hi = self.mesh.bounds()

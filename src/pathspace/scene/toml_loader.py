@@ -16,6 +16,7 @@ import trimesh
 from ..bsdfs import KINDS, MaterialTable
 from ..camera import FOV_AXES, PinholeCamera, ThinLensCamera
 from ..lights import AreaLights, DirectionalLight, Environment, LightSet, PointLight, SpotLight
+from ..spectra import Blackbody, Cauchy, Colour, ColourTable, Illuminant, SampledSpectrum, Sellmeier, check_emission
 from . import shapes as builtin
 from .errors import SceneError
 from .fields import Fields
@@ -61,20 +62,20 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>",
         raise top.error(f"this pathspace reads scene format {FORMAT_VERSION}, got {version}", "format")
     top.string("name", "")
     top.string("description", "")
+    base = Path(base_dir) if base_dir is not None else Path.cwd()
     camera = _camera(top.sub("camera"))
-    material_names, materials = _materials(top.sub("materials"))
+    material_names, materials = _materials(top.sub("materials"), base)
     shape_list = top.raw("shapes", None)
     if not isinstance(shape_list, list) or not shape_list:
         raise top.error("expected a non-empty array of tables ([[shapes]])", "shapes")
     light_list = top.raw("lights", [])
     if not isinstance(light_list, list):
         raise top.error("expected an array of tables ([[lights]])", "lights")
-    other_lights = [_light(Fields(table, f"lights[{i}]", source)) for i, table in enumerate(light_list)]
+    other_lights = [_light(Fields(table, f"lights[{i}]", source), base) for i, table in enumerate(light_list)]
     top.finish()
 
-    base = Path(base_dir) if base_dir is not None else Path.cwd()
     vertices, indices, material_ids, shape_ids, names = [], [], [], [], []
-    emit_tris, emit_radiance, emit_two_sided, emit_light = [], [], [], []
+    emit_tris, emit_light, emit_radiance, emit_two_sided = [], [], [], []
     offset = triangle_offset = 0
     for i, table in enumerate(shape_list):
         shape = Fields(table, f"shapes[{i}]", source)
@@ -88,7 +89,7 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>",
         emitter = shape.sub("emitter", None)
         radiance = two_sided = None
         if emitter is not None:
-            radiance = np.array(_emission(emitter, "radiance"))
+            radiance = _built(emitter, lambda: check_emission(_colour(emitter, "radiance", base=base), "radiance"))
             two_sided = emitter.boolean("two_sided", False)
             emitter.finish()
         shape.finish()
@@ -100,19 +101,17 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>",
         names.append(name)
         if radiance is not None:
             emit_tris.append(triangle_offset + np.arange(len(f)))
-            emit_radiance.append(np.repeat(radiance[:, None], len(f), axis=1))
-            emit_two_sided.append(np.full(len(f), two_sided))
-            emit_light.append(np.full(len(f), len(emit_tris) - 1))
+            emit_light.append(np.full(len(f), len(emit_radiance)))
+            emit_radiance.append(radiance)
+            emit_two_sided.append(two_sided)
         offset += len(v)
         triangle_offset += len(f)
 
     mesh = TriangleMesh(np.concatenate(vertices), np.concatenate(indices), np.concatenate(material_ids),
                         np.concatenate(shape_ids))
-    if emit_tris:
-        area = AreaLights(mesh, np.concatenate(emit_tris), np.concatenate(emit_radiance, axis=1),
-                          np.concatenate(emit_two_sided), np.concatenate(emit_light))
-    else:
-        area = AreaLights(mesh, np.zeros(0, np.int64), np.zeros((3, 0)), np.zeros(0, bool), np.zeros(0, np.int64))
+    area = AreaLights(mesh, np.concatenate(emit_tris or [np.zeros(0, np.int64)]),
+                      np.concatenate(emit_light or [np.zeros(0, np.int64)]), ColourTable(emit_radiance, "illuminant"),
+                      np.array(emit_two_sided, dtype=bool))
     lo, hi = mesh.bounds()
     lights = LightSet(area, other_lights, scene_radius=0.5 * float(np.linalg.norm(hi - lo)))
     return Scene(camera=camera, mesh=mesh, materials=MaterialTable(material_names, materials), lights=lights,
@@ -139,9 +138,58 @@ def _camera(fields: Fields) -> PinholeCamera:
     return _built(fields, lambda: PinholeCamera(position, look_at, up, fov, int(width), int(height), fov_axis=fov_axis))
 
 
-def _colour(fields: Fields, name: str, default=Fields.REQUIRED) -> tuple[float, float, float]:
-    """An RGB triple of finite numbers >= 0 (the material checks its own range)."""
+def _colour(fields: Fields, name: str, default=Fields.REQUIRED, *, base: Path) -> Colour:
+    """An RGB triple of numbers >= 0, or a spectrum table (see docs/scene-format.md)."""
+    value = fields.raw(name, default)
+    if isinstance(value, dict):
+        return _spectrum(fields.sub(name), base)
+    if not isinstance(value, (list, tuple)):
+        raise fields.error(f"expected 3 numbers (RGB) or a spectrum table, got {value!r}", name)
     return tuple(float(x) for x in fields.vector(name, 3, default, low=0.0))
+
+
+def _spectrum(fields: Fields, base: Path) -> Colour:
+    forms = [key for key in ("wavelengths", "file", "blackbody", "illuminant") if fields.has(key)]
+    if len(forms) != 1:
+        raise fields.error("expected exactly one of: wavelengths (with values), file, blackbody, illuminant", None)
+    scale = fields.number("scale", 1.0, low=0.0)
+    form = forms[0]
+    if form == "wavelengths":
+        wavelengths = fields.raw("wavelengths")
+        values = fields.raw("values")
+        if not (isinstance(wavelengths, list) and isinstance(values, list)):
+            raise fields.error("expected lists of wavelengths (nm) and values of the same length", "wavelengths")
+        spectrum = _built(fields, lambda: SampledSpectrum(tuple(wavelengths), tuple(values), scale))
+    elif form == "file":
+        path = base / fields.string("file")
+        if not path.is_file():
+            raise fields.error(f"spectrum file not found: {path}", "file")
+        spectrum = _built(fields, lambda: SampledSpectrum.from_csv(path, scale))
+    elif form == "blackbody":
+        spectrum = _built(fields, lambda: Blackbody(fields.number("blackbody", low=0.0, low_open=True), scale))
+    else:
+        spectrum = _built(fields, lambda: Illuminant(fields.string("illuminant"), scale))
+        _built(fields, spectrum.on_grid)  # an unknown name fails here, with the names colour-science knows
+    fields.finish()
+    return spectrum
+
+
+def _ior(fields: Fields):
+    """A number > 0, or a dispersion law: { cauchy = [a, b] } or { sellmeier = { b = [...], c = [...] } }."""
+    value = fields.raw("ior", 1.5)
+    if not isinstance(value, dict):
+        return fields.number("ior", 1.5, low=0.0, low_open=True)
+    law = fields.sub("ior")
+    if law.has("cauchy"):
+        a, b = law.vector("cauchy", 2)
+        result = _built(law, lambda: Cauchy(float(a), float(b)))
+    else:
+        sellmeier = law.sub("sellmeier")
+        b, c = sellmeier.vector("b", 3), sellmeier.vector("c", 3)
+        sellmeier.finish()
+        result = _built(law, lambda: Sellmeier(tuple(b), tuple(c)))
+    law.finish()
+    return result
 
 
 def _built(fields: Fields, make):
@@ -153,56 +201,50 @@ def _built(fields: Fields, make):
         raise fields.error(message or str(error), field if message else None) from None
 
 
-def _material(table: Fields):
+def _material(table: Fields, base: Path):
     kind = table.string("type", choices=MATERIAL_TYPES)
     if kind == "diffuse":
-        args = (_colour(table, "reflectance"),)
+        args = (_colour(table, "reflectance", base=base),)
     elif kind == "mirror":
-        args = (_colour(table, "reflectance", [1.0, 1.0, 1.0]),)
+        args = (_colour(table, "reflectance", [1.0, 1.0, 1.0], base=base),)
     elif kind == "dielectric":
-        args = (table.number("ior", 1.5, low=0.0, low_open=True),)
+        args = (_ior(table),)
     elif kind == "conductor":
-        args = (_colour(table, "eta"), _colour(table, "k"), table.number("alpha"))
+        args = (_colour(table, "eta", base=base), _colour(table, "k", base=base), table.number("alpha"))
     else:
-        args = (_colour(table, "diffuse"), _colour(table, "specular"), table.number("exponent", low=0.0))
+        args = (_colour(table, "diffuse", base=base), _colour(table, "specular", base=base),
+                table.number("exponent", low=0.0))
     table.finish()
     return _built(table, lambda: KINDS[kind](*args))
 
 
-def _materials(fields: Fields) -> tuple[list[str], list]:
+def _materials(fields: Fields, base: Path) -> tuple[list[str], list]:
     names, materials = [], []
     for name in fields.table:
-        materials.append(_material(fields.sub(name)))
+        materials.append(_material(fields.sub(name), base))
         names.append(name)
     if not names:
         raise fields.error("expected at least one material", None)
     return names, materials
 
 
-def _light(fields: Fields):
+def _light(fields: Fields, base: Path):
     kind = fields.string("type", choices=LIGHT_TYPES)
     if kind == "point":
-        args = (tuple(fields.vector("position", 3)), _emission(fields, "intensity"))
+        args = (tuple(fields.vector("position", 3)), _colour(fields, "intensity", base=base))
     elif kind == "spot":
         cone = fields.number("cone_angle", 30.0, low=0.0, high=90.0, low_open=True)
         args = (tuple(fields.vector("position", 3)), tuple(fields.vector("look_at", 3)),
-                _emission(fields, "intensity"), cone, fields.number("falloff_start", min(25.0, cone), low=0.0,
-                                                                   high=cone))
+                _colour(fields, "intensity", base=base), cone,
+                fields.number("falloff_start", min(25.0, cone), low=0.0, high=cone))
     elif kind == "directional":
-        args = (tuple(fields.vector("direction", 3)), _emission(fields, "irradiance"))
+        args = (tuple(fields.vector("direction", 3)), _colour(fields, "irradiance", base=base))
     else:
-        args = (_emission(fields, "radiance"),)
+        args = (_colour(fields, "radiance", base=base),)
     fields.finish()
     light_types = {"point": PointLight, "spot": SpotLight, "directional": DirectionalLight,
                    "environment": Environment}
     return _built(fields, lambda: light_types[kind](*args))
-
-
-def _emission(fields: Fields, name: str) -> tuple[float, float, float]:
-    value = fields.vector(name, 3, low=0.0)
-    if not np.any(value > 0):
-        raise fields.error("expected at least one positive component", name)
-    return tuple(float(x) for x in value)
 
 
 def _shape_geometry(shape: Fields, base: Path) -> tuple[np.ndarray, np.ndarray]:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..bsdfs import MaterialTable, Surface
-from ..colours import RGBColours
+from ..spectra import RGBColours
 from .chi2 import ChiSquareResult, chi2_test_directions
 
 __all__ = ["BSDFCheck", "bsdf_chi2", "bsdf_consistency", "bsdf_albedo", "fresnel_dielectric_albedo"]
