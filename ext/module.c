@@ -43,6 +43,10 @@ static PyMethodDef module_methods[] = {
      "tune_allocator(mmap_threshold, trim_threshold)\n--\n\nSet glibc's M_MMAP_THRESHOLD and M_TRIM_THRESHOLD "
      "(mallopt) so that wavefront-sized arrays reuse heap memory instead of fresh, page-faulting mappings. "
      "Returns False where this is not glibc."},
+    {"mis_weights", (PyCFunction)(void (*)(void))ps_mis_weights, METH_VARARGS | METH_KEYWORDS,
+     "mis_weights(s, t, lane, light_offset, light_fwd, light_rev, light_delta, eye_offset, eye_fwd, eye_rev, "
+     "eye_delta, light_is_delta, qs_fwd, qs_rev, qs_minus_rev, pt_fwd, pt_rev, pt_minus_rev, *, camera_is_delta, "
+     "heuristic, beta, target_s, target_t)\n--\n\nBDPT MIS weight of every connection (see ext/mis.c)."},
     {"default_thread_count", default_thread_count, METH_NOARGS,
      "default_thread_count()\n--\n\nNumber of cores this process may run on."},
     {NULL, NULL, 0, NULL},

@@ -16,6 +16,9 @@ void ps_embree_clear_error(void);
 PyObject *ps_load_embree(PyObject *module, PyObject *args);
 PyObject *ps_embree_loaded(PyObject *module, PyObject *unused);
 
+/* BDPT MIS weights (mis.c). */
+PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs);
+
 /* Accel type (accel.c). */
 extern PyTypeObject PsAccelType;
 int ps_default_thread_count(void);

@@ -1,0 +1,241 @@
+/*
+ * MIS weights of bidirectional path tracing strategies, from ratios of vertex pdfs.
+ *
+ * A path x_0 .. x_k (x_0 on a light, x_k on the camera) built by strategy (s, t),
+ * s + t = k + 1, has s light-subpath vertices x_0 .. x_{s-1} and t eye-subpath
+ * vertices x_k .. x_s.  Every vertex has two densities in area measure: p_fwd,
+ * with which its own subpath generated it, and p_rev, with which the other
+ * subpath would have.  The probability of strategy s' relative to that of s is
+ * a product of p_rev / p_fwd over the vertices between the two split points
+ * (Veach 1997, eq. 10.9); the weight is 1 / sum over strategies s' of
+ * (p_s' / p_s)^beta (power heuristic; beta = 1: balance).  Ratios are built up
+ * one vertex at a time, as in pbrt-v4's MISWeight, so no product of raw pdfs
+ * is ever formed, and carried as mantissa and binary exponent, so that paths of
+ * hundreds of vertices whose densities span hundreds of decades stay exact to
+ * rounding; a pdf of 0 (delta vertices) is remapped to 1 so that the
+ * ratio through a delta vertex is 1, and a strategy is counted only if the
+ * connection it needs joins two non-delta vertices (s' = 0: the light can be
+ * hit; s' = k + 1: the camera can be hit).
+ *
+ * Inputs per connection m: s, t, lane; the subpaths of each lane as flat
+ * arrays (CSR offsets per lane) of p_fwd, p_rev and delta; and the values that
+ * change for this connection: p_fwd and p_rev of the two connection vertices
+ * x_{s-1} ("qs") and x_s ("pt"), and p_rev of their neighbours x_{s-2} and
+ * x_{s+1} (pbrt's ScopedAssignments).  The connection vertices are read from
+ * these overrides only, so they need not exist in the subpath arrays (a fresh
+ * light sample for s = 1, a lens sample for t = 1, a lens hit for t = 0).
+ */
+#include "native.h"
+
+#define NPY_NO_DEPRECATED_API NPY_2_0_API_VERSION
+#define NO_IMPORT_ARRAY
+#define PY_ARRAY_UNIQUE_SYMBOL pathspace_native_ARRAY_API
+#include <numpy/arrayobject.h>
+
+#include <math.h>
+#include <stdint.h>
+#include <string.h>
+
+enum { H_BALANCE = 0, H_POWER = 1, H_UNIFORM = 2, H_SINGLE = 3, H_NONE = 4 };
+
+static inline double remap0(double x) { return x != 0.0 ? x : 1.0; }
+
+/* A positive ratio kept as mantissa * 2^exponent, so that long products of pdf ratios spanning
+ * hundreds of decades neither overflow nor underflow before they are compared. */
+typedef struct {
+    double mantissa;
+    long exponent;
+} Ratio;
+
+static inline void ratio_times(Ratio *r, double numerator, double denominator)
+{
+    int en, ed, er;
+    double mn = frexp(numerator, &en), md = frexp(denominator, &ed);
+    r->mantissa = frexp(r->mantissa * (mn / md), &er);
+    r->exponent += (long)en - ed + er;
+}
+
+typedef struct {
+    const int32_t *s, *t;
+    const int64_t *lane;
+    const int64_t *light_offset, *eye_offset;
+    const double *light_fwd, *light_rev, *eye_fwd, *eye_rev;
+    const uint8_t *light_delta, *eye_delta, *light_is_delta;
+    const double *qs_fwd, *qs_rev, *qs_minus_rev, *pt_fwd, *pt_rev, *pt_minus_rev;
+    int camera_is_delta;
+    int heuristic;
+    double beta;
+    int target_s, target_t;
+    double *out;
+} MisBatch;
+
+/* The heuristic's term for a strategy whose probability is r times the current one's. */
+static inline double term(const Ratio *r, const MisBatch *b)
+{
+    if (b->heuristic == H_UNIFORM)
+        return 1.0;
+    double beta = b->heuristic == H_POWER ? b->beta : 1.0;
+    if (beta == 1.0 && labs(r->exponent) < 2000)
+        return ldexp(r->mantissa, (int)r->exponent);
+    if (beta == 2.0 && labs(r->exponent) < 1000)
+        return ldexp(r->mantissa * r->mantissa, (int)(2 * r->exponent));
+    double log2_value = beta * (log2(r->mantissa) + (double)r->exponent);
+    return log2_value > 1100.0 ? INFINITY : exp2(log2_value);
+}
+
+static double weight_of(const MisBatch *b, npy_intp m)
+{
+    int s = b->s[m], t = b->t[m];
+    if (b->heuristic == H_NONE)
+        return 1.0;
+    if (b->heuristic == H_SINGLE)
+        return (s == b->target_s && t == b->target_t) ? 1.0 : 0.0;
+    int64_t lane = b->lane[m];
+    const double *lf = b->light_fwd + b->light_offset[lane], *lr = b->light_rev + b->light_offset[lane];
+    const uint8_t *ld = b->light_delta + b->light_offset[lane];
+    const double *ef = b->eye_fwd + b->eye_offset[lane], *er = b->eye_rev + b->eye_offset[lane];
+    const uint8_t *ed = b->eye_delta + b->eye_offset[lane];
+    int64_t light_len = b->light_offset[lane + 1] - b->light_offset[lane];
+    int64_t eye_len = b->eye_offset[lane + 1] - b->eye_offset[lane];
+    /* A strategy that cannot produce the path has weight 0: it would connect through a delta vertex,
+     * hit a light that cannot be hit (s = 0), or hit a camera that cannot be hit (t = 0). */
+    if ((s == 0 && b->light_is_delta[lane]) || (t == 0 && b->camera_is_delta) ||
+        (s >= 1 && s - 1 < light_len && ld[s - 1]) || (t >= 1 && t - 1 < eye_len && ed[t - 1]))
+        return 0.0;
+    double sum = 0.0;
+    Ratio r = {1.0, 0};
+
+    /* Eye side: move the split toward the camera, one eye vertex at a time (t' = t-1 .. 0). */
+    for (int i = t - 1; i >= 0; --i) {
+        double fwd = i == t - 1 ? b->pt_fwd[m] : ef[i];
+        double rev = i == t - 1 ? b->pt_rev[m] : (i == t - 2 ? b->pt_minus_rev[m] : er[i]);
+        ratio_times(&r, remap0(rev), remap0(fwd));
+        int delta_here = i == t - 1 ? 0 : ed[i];
+        int valid = i > 0 ? (!delta_here && !ed[i - 1]) : (!delta_here && !b->camera_is_delta);
+        if (valid)
+            sum += term(&r, b);
+    }
+    /* Light side: move the split toward the light (s' = s-1 .. 0). */
+    r.mantissa = 1.0;
+    r.exponent = 0;
+    for (int i = s - 1; i >= 0; --i) {
+        double fwd = i == s - 1 ? b->qs_fwd[m] : lf[i];
+        double rev = i == s - 1 ? b->qs_rev[m] : (i == s - 2 ? b->qs_minus_rev[m] : lr[i]);
+        ratio_times(&r, remap0(rev), remap0(fwd));
+        int delta_here = i == s - 1 ? 0 : ld[i];
+        int delta_before = i > 0 ? ld[i - 1] : b->light_is_delta[lane];
+        if (!delta_here && !delta_before)
+            sum += term(&r, b);
+    }
+    return 1.0 / (1.0 + sum);
+}
+
+static PyArrayObject *as_array(PyObject *obj, int type, const char *name, npy_intp length)
+{
+    PyArrayObject *a = (PyArrayObject *)PyArray_FROMANY(obj, type, 1, 1, NPY_ARRAY_C_CONTIGUOUS | NPY_ARRAY_ALIGNED);
+    if (a == NULL) {
+        PyErr_Clear();
+        PyErr_Format(PyExc_TypeError, "mis_weights: %s must be a 1-D array convertible to the expected dtype", name);
+        return NULL;
+    }
+    if (length >= 0 && PyArray_DIM(a, 0) != length) {
+        PyErr_Format(PyExc_ValueError, "mis_weights: %s has %zd entries, expected %zd", name,
+                     (Py_ssize_t)PyArray_DIM(a, 0), (Py_ssize_t)length);
+        Py_DECREF(a);
+        return NULL;
+    }
+    return a;
+}
+
+PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs)
+{
+    (void)module;
+    static char *kwlist[] = {"s", "t", "lane", "light_offset", "light_fwd", "light_rev", "light_delta",
+                             "eye_offset", "eye_fwd", "eye_rev", "eye_delta", "light_is_delta",
+                             "qs_fwd", "qs_rev", "qs_minus_rev", "pt_fwd", "pt_rev", "pt_minus_rev",
+                             "camera_is_delta", "heuristic", "beta", "target_s", "target_t", NULL};
+    PyObject *o[18];
+    int camera_is_delta = 0, heuristic = H_POWER, target_s = -1, target_t = -1;
+    double beta = 2.0;
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOOOOOOOOOO|$pidii:mis_weights", kwlist, &o[0], &o[1],
+                                     &o[2], &o[3], &o[4], &o[5], &o[6], &o[7], &o[8], &o[9], &o[10], &o[11], &o[12],
+                                     &o[13], &o[14], &o[15], &o[16], &o[17], &camera_is_delta, &heuristic, &beta,
+                                     &target_s, &target_t))
+        return NULL;
+    if (heuristic < H_BALANCE || heuristic > H_NONE) {
+        PyErr_SetString(PyExc_ValueError, "mis_weights: unknown heuristic code");
+        return NULL;
+    }
+    if (!(beta > 0.0) || !isfinite(beta)) {
+        PyErr_SetString(PyExc_ValueError, "mis_weights: beta must be finite and > 0");
+        return NULL;
+    }
+    PyArrayObject *a[18] = {NULL};
+    PyObject *result = NULL;
+    static const int types[18] = {NPY_INT32, NPY_INT32, NPY_INT64, NPY_INT64, NPY_DOUBLE, NPY_DOUBLE, NPY_UINT8,
+                                  NPY_INT64, NPY_DOUBLE, NPY_DOUBLE, NPY_UINT8, NPY_UINT8, NPY_DOUBLE, NPY_DOUBLE,
+                                  NPY_DOUBLE, NPY_DOUBLE, NPY_DOUBLE, NPY_DOUBLE};
+    for (int k = 0; k < 18; ++k) {
+        a[k] = as_array(o[k], types[k], kwlist[k], -1);
+        if (a[k] == NULL)
+            goto done;
+    }
+    npy_intp m_count = PyArray_DIM(a[0], 0);
+    npy_intp lanes = PyArray_DIM(a[3], 0) - 1;
+    if (lanes < 0 || PyArray_DIM(a[7], 0) != lanes + 1 || PyArray_DIM(a[11], 0) != lanes) {
+        PyErr_SetString(PyExc_ValueError, "mis_weights: light_offset and eye_offset need lanes + 1 entries and "
+                                          "light_is_delta one per lane");
+        goto done;
+    }
+    for (int k = 1; k < 18; ++k) {
+        if (k == 3 || k == 4 || k == 5 || k == 6 || k == 7 || k == 8 || k == 9 || k == 10 || k == 11)
+            continue;
+        if (PyArray_DIM(a[k], 0) != m_count) {
+            PyErr_Format(PyExc_ValueError, "mis_weights: %s has %zd entries, expected one per connection (%zd)",
+                         kwlist[k], (Py_ssize_t)PyArray_DIM(a[k], 0), (Py_ssize_t)m_count);
+            goto done;
+        }
+    }
+    const int64_t *loff = (const int64_t *)PyArray_DATA(a[3]), *eoff = (const int64_t *)PyArray_DATA(a[7]);
+    npy_intp light_vertices = PyArray_DIM(a[4], 0), eye_vertices = PyArray_DIM(a[8], 0);
+    if (PyArray_DIM(a[5], 0) != light_vertices || PyArray_DIM(a[6], 0) != light_vertices ||
+        PyArray_DIM(a[9], 0) != eye_vertices || PyArray_DIM(a[10], 0) != eye_vertices ||
+        loff[lanes] != light_vertices || eoff[lanes] != eye_vertices) {
+        PyErr_SetString(PyExc_ValueError, "mis_weights: subpath arrays disagree with their offsets");
+        goto done;
+    }
+    const int32_t *s = (const int32_t *)PyArray_DATA(a[0]), *t = (const int32_t *)PyArray_DATA(a[1]);
+    const int64_t *lane = (const int64_t *)PyArray_DATA(a[2]);
+    for (npy_intp m = 0; m < m_count; ++m) {
+        if (lane[m] < 0 || lane[m] >= lanes || s[m] < 0 || t[m] < 0 || s[m] + t[m] < 2 ||
+            s[m] - 1 > loff[lane[m] + 1] - loff[lane[m]] || t[m] - 1 > eoff[lane[m] + 1] - eoff[lane[m]]) {
+            PyErr_Format(PyExc_ValueError, "mis_weights: connection %zd (lane %lld, s=%d, t=%d) does not fit its "
+                         "subpaths", (Py_ssize_t)m, (long long)lane[m], s[m], t[m]);
+            goto done;
+        }
+    }
+    npy_intp dims[1] = {m_count};
+    result = PyArray_SimpleNew(1, dims, NPY_DOUBLE);
+    if (result == NULL)
+        goto done;
+    MisBatch b = {
+        s, t, lane, loff, eoff,
+        (const double *)PyArray_DATA(a[4]), (const double *)PyArray_DATA(a[5]),
+        (const double *)PyArray_DATA(a[8]), (const double *)PyArray_DATA(a[9]),
+        (const uint8_t *)PyArray_DATA(a[6]), (const uint8_t *)PyArray_DATA(a[10]),
+        (const uint8_t *)PyArray_DATA(a[11]),
+        (const double *)PyArray_DATA(a[12]), (const double *)PyArray_DATA(a[13]),
+        (const double *)PyArray_DATA(a[14]), (const double *)PyArray_DATA(a[15]),
+        (const double *)PyArray_DATA(a[16]), (const double *)PyArray_DATA(a[17]),
+        camera_is_delta, heuristic, beta, target_s, target_t,
+        (double *)PyArray_DATA((PyArrayObject *)result),
+    };
+    Py_BEGIN_ALLOW_THREADS
+    for (npy_intp m = 0; m < m_count; ++m)
+        b.out[m] = weight_of(&b, m);
+    Py_END_ALLOW_THREADS
+done:
+    for (int k = 0; k < 18; ++k)
+        Py_XDECREF(a[k]);
+    return result;
+}

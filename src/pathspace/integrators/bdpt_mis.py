@@ -1,0 +1,131 @@
+"""MIS weights of bidirectional strategies: the C kernel's interface, and a NumPy reference of it.
+
+See ``ext/mis.c`` for the formulation (Veach 1997, ch. 10; pbrt-v4's
+MISWeight).  A batch holds the two subpaths of every lane as flat arrays
+with CSR offsets (:class:`SubpathPdfs`) and, per connection, its strategy
+(s, t), its lane and the densities of the connection vertices that the
+connection changes (:class:`Connections`).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .. import _native
+
+__all__ = ["HEURISTICS", "SubpathPdfs", "Connections", "mis_weights", "mis_weights_reference"]
+
+HEURISTICS = {"balance": 0, "power": 1, "uniform": 2, "single": 3, "none": 4}
+
+
+@dataclass
+class SubpathPdfs:
+    """Area-measure densities of the vertices of one kind of subpath, lane after lane.
+
+    ``offset`` (lanes + 1,): vertices of lane j are ``offset[j]`` .. ``offset[j+1]-1``,
+    in subpath order (vertex 0 on the light or the camera).  ``fwd``: density
+    with which the subpath generated the vertex; ``rev``: with which the other
+    direction would have (0 where unknown or delta); ``delta``: specular vertex.
+    """
+
+    offset: np.ndarray
+    fwd: np.ndarray
+    rev: np.ndarray
+    delta: np.ndarray
+
+
+@dataclass
+class Connections:
+    """One row per connection: strategy, lane, and the densities it changes (see ext/mis.c)."""
+
+    s: np.ndarray
+    t: np.ndarray
+    lane: np.ndarray
+    qs_fwd: np.ndarray
+    qs_rev: np.ndarray
+    qs_minus_rev: np.ndarray
+    pt_fwd: np.ndarray
+    pt_rev: np.ndarray
+    pt_minus_rev: np.ndarray
+
+
+def mis_weights(c: Connections, light: SubpathPdfs, eye: SubpathPdfs, light_is_delta: np.ndarray,
+                camera_is_delta: bool, heuristic: str = "power", beta: float = 2.0,
+                target: tuple[int, int] = (-1, -1)) -> np.ndarray:
+    """Weight of every connection, computed in C."""
+    return _native.mis_weights(
+        np.ascontiguousarray(c.s, np.int32), np.ascontiguousarray(c.t, np.int32), np.ascontiguousarray(c.lane, np.int64),
+        np.ascontiguousarray(light.offset, np.int64), np.ascontiguousarray(light.fwd, np.float64),
+        np.ascontiguousarray(light.rev, np.float64), np.ascontiguousarray(light.delta, np.uint8),
+        np.ascontiguousarray(eye.offset, np.int64), np.ascontiguousarray(eye.fwd, np.float64),
+        np.ascontiguousarray(eye.rev, np.float64), np.ascontiguousarray(eye.delta, np.uint8),
+        np.ascontiguousarray(light_is_delta, np.uint8),
+        *(np.ascontiguousarray(v, np.float64) for v in (c.qs_fwd, c.qs_rev, c.qs_minus_rev, c.pt_fwd, c.pt_rev,
+                                                         c.pt_minus_rev)),
+        camera_is_delta=bool(camera_is_delta), heuristic=HEURISTICS[heuristic], beta=float(beta),
+        target_s=int(target[0]), target_t=int(target[1]))
+
+
+def mis_weights_reference(c: Connections, light: SubpathPdfs, eye: SubpathPdfs, light_is_delta: np.ndarray,
+                          camera_is_delta: bool, heuristic: str = "power", beta: float = 2.0,
+                          target: tuple[int, int] = (-1, -1)) -> np.ndarray:
+    """The same weights, written plainly in Python (for tests): the sum over strategies s' of
+    (p_s' / p_s)^beta, p_s' / p_s built as a product of p_rev / p_fwd one vertex at a time
+    (kept as mantissa and exponent)."""
+    def remap0(x):
+        return x if x != 0 else 1.0
+
+    def times(r, numerator, denominator):
+        """Multiply a (mantissa, exponent) ratio by numerator / denominator without overflow."""
+        mn, en = math.frexp(numerator)
+        md, ed = math.frexp(denominator)
+        mantissa, er = math.frexp(r[0] * (mn / md))
+        return mantissa, r[1] + en - ed + er
+
+    def term(r):
+        if heuristic == "uniform":
+            return 1.0
+        exponent = beta if heuristic == "power" else 1.0
+        log2_value = exponent * (math.log2(r[0]) + r[1])
+        if log2_value >= 1024:
+            return math.inf
+        if exponent in (1.0, 2.0):
+            return math.ldexp(r[0] ** exponent, int(exponent * r[1])) if log2_value > -1100 else 0.0
+        return 2.0 ** log2_value
+
+    out = np.zeros(len(c.s))
+    for m in range(len(c.s)):
+        s, t, lane = int(c.s[m]), int(c.t[m]), int(c.lane[m])
+        if heuristic == "none":
+            out[m] = 1.0
+            continue
+        if heuristic == "single":
+            out[m] = float((s, t) == tuple(target))
+            continue
+        lo, hi = light.offset[lane], light.offset[lane + 1]
+        eo, ei = eye.offset[lane], eye.offset[lane + 1]
+        lf, lr, ld = light.fwd[lo:hi], light.rev[lo:hi], light.delta[lo:hi]
+        ef, er, ed = eye.fwd[eo:ei], eye.rev[eo:ei], eye.delta[eo:ei]
+        if ((s == 0 and light_is_delta[lane]) or (t == 0 and camera_is_delta)
+                or (s >= 1 and s - 1 < len(ld) and ld[s - 1]) or (t >= 1 and t - 1 < len(ed) and ed[t - 1])):
+            continue
+        total, r = 0.0, (1.0, 0)
+        for i in range(t - 1, -1, -1):
+            fwd = c.pt_fwd[m] if i == t - 1 else ef[i]
+            rev = c.pt_rev[m] if i == t - 1 else (c.pt_minus_rev[m] if i == t - 2 else er[i])
+            r = times(r, remap0(rev), remap0(fwd))
+            delta_here = False if i == t - 1 else bool(ed[i])
+            valid = (not delta_here and not ed[i - 1]) if i > 0 else (not delta_here and not camera_is_delta)
+            total += term(r) if valid else 0.0
+        r = (1.0, 0)
+        for i in range(s - 1, -1, -1):
+            fwd = c.qs_fwd[m] if i == s - 1 else lf[i]
+            rev = c.qs_rev[m] if i == s - 1 else (c.qs_minus_rev[m] if i == s - 2 else lr[i])
+            r = times(r, remap0(rev), remap0(fwd))
+            delta_here = False if i == s - 1 else bool(ld[i])
+            delta_before = bool(ld[i - 1]) if i > 0 else bool(light_is_delta[lane])
+            total += term(r) if (not delta_here and not delta_before) else 0.0
+        out[m] = 1.0 / (1.0 + total)
+    return out

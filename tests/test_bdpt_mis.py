@@ -1,0 +1,112 @@
+"""The BDPT MIS kernel: C against the NumPy reference, partition of unity, infeasible strategies, speed-free."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pathspace.integrators.bdpt_mis import Connections, SubpathPdfs, mis_weights, mis_weights_reference
+
+
+def random_path(rng, k, delta_rate=0.25):
+    """A path x_0 .. x_k: light-side and camera-side densities over many decades, random delta vertices."""
+    p_light = 10.0 ** rng.uniform(-150, 150, k + 1)
+    p_eye = 10.0 ** rng.uniform(-150, 150, k + 1)
+    delta = rng.random(k + 1) < delta_rate
+    delta[0] = delta[k] = False  # light and camera vertices are never specular
+    p_light[delta] = 0.0         # delta vertices carry no density (remapped to 1 by the kernel)
+    p_eye[delta] = 0.0
+    return p_light, p_eye, delta
+
+
+def strategy_batch(paths, heuristic_target=None):
+    """Every strategy s = 0 .. k+1 of every path, as connections over per-(path, s) lanes."""
+    rows, light_fwd, light_rev, light_delta, eye_fwd, eye_rev, eye_delta = [], [], [], [], [], [], []
+    light_offset, eye_offset = [0], [0]
+    lane_light_delta = []
+    for path_index, (p_l, p_e, delta, light_is_delta) in enumerate(paths):
+        k = len(p_l) - 1
+        for s in range(k + 2):
+            t = k + 1 - s
+            lane = len(light_offset) - 1
+            # Light subpath: x_0 .. x_{s-1}; eye subpath: x_k .. x_s (eye vertex j is path vertex k - j).
+            light_fwd += list(p_l[:s]); light_rev += list(p_e[:s]); light_delta += list(delta[:s])
+            eye_fwd += list(p_e[::-1][:t]); eye_rev += list(p_l[::-1][:t]); eye_delta += list(delta[::-1][:t])
+            light_offset.append(len(light_fwd)); eye_offset.append(len(eye_fwd))
+            lane_light_delta.append(light_is_delta)
+            get = lambda a, i: a[i] if 0 <= i <= k else 0.0
+            rows.append((path_index, s, t, lane, get(p_l, s - 1), get(p_e, s - 1), get(p_e, s - 2),
+                         get(p_e, s), get(p_l, s), get(p_l, s + 1)))
+    rows = np.array(rows, dtype=np.float64)
+    connections = Connections(rows[:, 1].astype(np.int32), rows[:, 2].astype(np.int32), rows[:, 3].astype(np.int64),
+                              *rows[:, 4:].T)
+    light = SubpathPdfs(np.array(light_offset), np.array(light_fwd), np.array(light_rev), np.array(light_delta))
+    eye = SubpathPdfs(np.array(eye_offset), np.array(eye_fwd), np.array(eye_rev), np.array(eye_delta))
+    return rows[:, 0].astype(int), connections, light, eye, np.array(lane_light_delta)
+
+
+def feasible(path, s, camera_is_delta):
+    p_l, p_e, delta, light_is_delta = path
+    k = len(p_l) - 1
+    if s == 0:
+        return not light_is_delta
+    if s == k + 1:
+        return not camera_is_delta
+    return not delta[s - 1] and not delta[s]
+
+
+@pytest.mark.parametrize("heuristic, beta", [("balance", 1.0), ("power", 2.0), ("power", 3.0), ("uniform", 1.0)])
+@pytest.mark.parametrize("camera_is_delta", [False, True], ids=["thin-lens", "pinhole"])
+def test_weights_partition_unity_over_feasible_strategies(heuristic, beta, camera_is_delta):
+    rng = np.random.default_rng(7)
+    paths = []
+    for _ in range(400):
+        k = int(rng.integers(1, 12)) if rng.random() < 0.9 else int(rng.integers(100, 260))
+        p_l, p_e, delta = random_path(rng, k)
+        paths.append((p_l, p_e, delta, bool(rng.random() < 0.2)))
+    owner, connections, light, eye, light_is_delta = strategy_batch(paths)
+    w = mis_weights(connections, light, eye, light_is_delta, camera_is_delta, heuristic, beta)
+    assert np.all(np.isfinite(w)) and np.all((w >= 0) & (w <= 1))
+    for index, path in enumerate(paths):
+        mine = owner == index
+        ok = np.array([feasible(path, s, camera_is_delta) for s in connections.s[mine]])
+        if ok.any():
+            assert abs(w[mine][ok].sum() - 1.0) < 1e-9, (index, w[mine])
+        assert np.all(w[mine][~ok] == 0.0)
+        if heuristic == "uniform" and ok.any():
+            np.testing.assert_allclose(w[mine][ok], 1.0 / ok.sum(), rtol=1e-12)
+
+
+@pytest.mark.parametrize("heuristic", ["balance", "power", "uniform", "single", "none"])
+def test_c_kernel_matches_the_numpy_reference(heuristic):
+    rng = np.random.default_rng(11)
+    paths = [(*random_path(rng, int(rng.integers(1, 9))), bool(rng.random() < 0.2)) for _ in range(150)]
+    owner, connections, light, eye, light_is_delta = strategy_batch(paths)
+    args = (connections, light, eye, light_is_delta, False, heuristic, 2.5, (2, 3))
+    fast, slow = mis_weights(*args), mis_weights_reference(*args)
+    np.testing.assert_allclose(fast, slow, rtol=1e-12, atol=0)
+
+
+def test_scale_invariance_of_ratios():
+    """Scaling every density by the same factor (a scene scaled by 1/sqrt(factor)) leaves every weight unchanged."""
+    rng = np.random.default_rng(3)
+    paths = [(*random_path(rng, 6, delta_rate=0.1), False) for _ in range(50)]
+    owner, connections, light, eye, light_is_delta = strategy_batch(paths)
+    base = mis_weights(connections, light, eye, light_is_delta, False)
+    for factor in (1e-12, 1e12):
+        scaled = lambda x: x * factor
+        c2 = Connections(connections.s, connections.t, connections.lane,
+                         *(scaled(getattr(connections, f)) for f in ("qs_fwd", "qs_rev", "qs_minus_rev", "pt_fwd",
+                                                                       "pt_rev", "pt_minus_rev")))
+        l2 = SubpathPdfs(light.offset, scaled(light.fwd), scaled(light.rev), light.delta)
+        e2 = SubpathPdfs(eye.offset, scaled(eye.fwd), scaled(eye.rev), eye.delta)
+        np.testing.assert_allclose(mis_weights(c2, l2, e2, light_is_delta, False), base, rtol=1e-12)
+
+
+def test_bad_batches_are_rejected():
+    rng = np.random.default_rng(0)
+    owner, connections, light, eye, light_is_delta = strategy_batch([(*random_path(rng, 3), False)])
+    connections.s[0] = 40
+    with pytest.raises(ValueError, match="does not fit its subpaths"):
+        mis_weights(connections, light, eye, light_is_delta, False)
+    with pytest.raises(KeyError):
+        mis_weights(connections, light, eye, light_is_delta, False, "maximum")
