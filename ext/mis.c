@@ -17,8 +17,10 @@
  * connection it needs joins two non-delta vertices (s' = 0: the light can be
  * hit; s' = k + 1: the camera can be hit).
  *
- * Inputs per connection m: s, t, lane; the subpaths of each lane as flat
- * arrays (CSR offsets per lane) of p_fwd, p_rev and delta; and the values that
+ * Inputs per connection m: s, t, lane, whether the light at x_0 can be hit
+ * (light_is_delta: point, spot and directional lights cannot); the subpaths
+ * of each lane as flat arrays (CSR offsets per lane) of p_fwd, p_rev and
+ * delta; and the values that
  * change for this connection: p_fwd and p_rev of the two connection vertices
  * x_{s-1} ("qs") and x_s ("pt"), and p_rev of their neighbours x_{s-2} and
  * x_{s+1} (pbrt's ScopedAssignments).  The connection vertices are read from
@@ -99,7 +101,7 @@ static double weight_of(const MisBatch *b, npy_intp m)
     int64_t eye_len = b->eye_offset[lane + 1] - b->eye_offset[lane];
     /* A strategy that cannot produce the path has weight 0: it would connect through a delta vertex,
      * hit a light that cannot be hit (s = 0), or hit a camera that cannot be hit (t = 0). */
-    if ((s == 0 && b->light_is_delta[lane]) || (t == 0 && b->camera_is_delta) ||
+    if ((s == 0 && b->light_is_delta[m]) || (t == 0 && b->camera_is_delta) ||
         (s >= 1 && s - 1 < light_len && ld[s - 1]) || (t >= 1 && t - 1 < eye_len && ed[t - 1]))
         return 0.0;
     double sum = 0.0;
@@ -123,7 +125,7 @@ static double weight_of(const MisBatch *b, npy_intp m)
         double rev = i == s - 1 ? b->qs_rev[m] : (i == s - 2 ? b->qs_minus_rev[m] : lr[i]);
         ratio_times(&r, remap0(rev), remap0(fwd));
         int delta_here = i == s - 1 ? 0 : ld[i];
-        int delta_before = i > 0 ? ld[i - 1] : b->light_is_delta[lane];
+        int delta_before = i > 0 ? ld[i - 1] : b->light_is_delta[m];
         if (!delta_here && !delta_before)
             sum += term(&r, b);
     }
@@ -182,13 +184,12 @@ PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs)
     }
     npy_intp m_count = PyArray_DIM(a[0], 0);
     npy_intp lanes = PyArray_DIM(a[3], 0) - 1;
-    if (lanes < 0 || PyArray_DIM(a[7], 0) != lanes + 1 || PyArray_DIM(a[11], 0) != lanes) {
-        PyErr_SetString(PyExc_ValueError, "mis_weights: light_offset and eye_offset need lanes + 1 entries and "
-                                          "light_is_delta one per lane");
+    if (lanes < 0 || PyArray_DIM(a[7], 0) != lanes + 1) {
+        PyErr_SetString(PyExc_ValueError, "mis_weights: light_offset and eye_offset need lanes + 1 entries");
         goto done;
     }
     for (int k = 1; k < 18; ++k) {
-        if (k == 3 || k == 4 || k == 5 || k == 6 || k == 7 || k == 8 || k == 9 || k == 10 || k == 11)
+        if (k >= 3 && k <= 10)
             continue;
         if (PyArray_DIM(a[k], 0) != m_count) {
             PyErr_Format(PyExc_ValueError, "mis_weights: %s has %zd entries, expected one per connection (%zd)",

@@ -32,7 +32,7 @@ def strategy_batch(paths, heuristic_target=None):
             light_fwd += list(p_l[:s]); light_rev += list(p_e[:s]); light_delta += list(delta[:s])
             eye_fwd += list(p_e[::-1][:t]); eye_rev += list(p_l[::-1][:t]); eye_delta += list(delta[::-1][:t])
             light_offset.append(len(light_fwd)); eye_offset.append(len(eye_fwd))
-            lane_light_delta.append(light_is_delta)
+            lane_light_delta.append(light_is_delta)  # one connection per lane here
             get = lambda a, i: a[i] if 0 <= i <= k else 0.0
             rows.append((path_index, s, t, lane, get(p_l, s - 1), get(p_e, s - 1), get(p_e, s - 2),
                          get(p_e, s), get(p_l, s), get(p_l, s + 1)))

@@ -16,18 +16,22 @@ CAMERAS = {
 
 @pytest.mark.parametrize("name", CAMERAS)
 def test_primary_ray_directions_follow_pdf_direction(name):
-    """Rays through uniform film points leave the lens centre (pinhole) with density 1 / (A cos^3 theta)."""
-    camera = CAMERAS["pinhole"]
+    """Rays through uniform film points leave a lens point (the pinhole, or a fixed point on the thin
+    lens) with density pdf_direction (1 / (A cos^3 theta) for the pinhole)."""
+    camera = CAMERAS[name]
+    lens_u = np.array([[0.3], [0.8]])
+    lens_point = camera.generate_rays(np.array([0]), np.full((2, 1), 0.5), lens_u)[0].astype(np.float64)
 
     def sample(u):
         count = u.shape[1]
         pixels = np.minimum((u[0] * camera.pixel_count).astype(np.int64), camera.pixel_count - 1)
-        jitter = np.stack((u[1], u[2]))
-        _, d = camera.generate_rays(pixels, jitter, u[3:5])
+        _, d = camera.generate_rays(pixels, u[1:3], np.repeat(lens_u, count, axis=1))
         return d, np.ones(count, bool)
 
-    result = chi2_test_directions(sample, camera.pdf_direction, sample_count=400_000, dims=5, res_z=200,
-                                  res_phi=100)
+    def pdf(d):
+        return camera.pdf_direction(d, np.repeat(lens_point, d.shape[1], axis=1))
+
+    result = chi2_test_directions(sample, pdf, sample_count=400_000, dims=3, res_z=200, res_phi=100)
     assert result.passed, str(result)
 
 

@@ -82,6 +82,12 @@ def test_base_scene_loads():
     ({"materials__grey": {"type": "conductor", "eta": [0.2] * 3, "k": [3] * 3, "alpha": 0}},
      r"materials.grey.alpha: expected a GGX roughness in \[0.0001, 1\], got 0"),
     ({"materials__grey": {"type": "dielectric", "ior": -1}}, r"materials.grey.ior: expected a number > 0"),
+    ({"materials__grey": {"type": "dielectric", "ior": {}}}, r"materials.grey.ior: expected a number > 0 or a "
+                                                             r"dispersion law"),
+    ({"materials__grey": {"type": "dielectric", "ior": {"cauchy": [1.0, -0.5]}}},
+     r"materials.grey.ior.cauchy: a = 1.0, b = -0.5 give an index <= 0 within 360-830 nm"),
+    ({"lights": [{"type": "environment", "radiance": [1, 1, 1]}] * 2},
+     r"test.toml: lights: at most one environment light is supported, got 2"),
     ({"lights": [{"type": "point", "position": [0, 0, 1]}]}, r"lights\[0\].intensity: required field is missing"),
     ({"lights": [{"type": "spot", "position": [0, 0, 1], "look_at": [0, 0, 1], "intensity": [1, 1, 1]}]},
      r"lights\[0\].look_at: must differ from position"),

@@ -146,12 +146,29 @@ def test_dispersion_separates_wavelengths_in_order():
                                    np.full((3, 1), 0.9999)).wi
         out = Dielectric.sample(params, Surface.facing(n2[:, None].astype(np.float32), inside),
                                 np.full((3, 1), 0.9999))
-        assert out.weight[0, 0] > 0 and np.all(out.weight[1:, 0] == 0)  # secondaries terminated, hero x 4
+        assert out.weight[0, 0] > 0 and np.all(out.weight[1:, 0] == 0) and out.terminated[0]  # secondaries terminated
         assert n2 @ out.wi[:, 0] > 0  # refracted out of the prism (no total internal reflection)
         exits.append(np.degrees(np.arccos(np.clip(incoming @ out.wi[:, 0].astype(np.float64), -1, 1))))
     deviation = np.array(exits)
     assert np.all(np.diff(deviation) < 0)      # blue (400 nm) deviated most, red least
     assert deviation[0] - deviation[-1] > 1.0  # by more than a degree for this flint glass
+
+
+@pytest.mark.parametrize("ior", [1.5, {"cauchy": [1.5, 0.0]}, {"cauchy": [1.5046, 0.0042]}],
+                         ids=["constant", "cauchy-flat", "cauchy-bk7"])
+def test_glass_slab_before_a_white_environment_shows_white(ior):
+    """Every path through a glass slab ends in the environment with weight 1 (the 1/eta^2 of entering
+    and leaving cancel), so the image is the environment's white, 1, dispersive or not -- also after
+    two dispersive interfaces, where terminating the secondary wavelengths twice would give 4."""
+    scene = ps.scene_from_dict({
+        "camera": {"position": [0, 0, 5], "look_at": [0, 0, 0], "fov": 10, "resolution": [8, 8]},
+        "materials": {"glass": {"type": "dielectric", "ior": ior}},
+        "shapes": [{"type": "box", "center": [0, 0, 0], "size": [4, 4, 1], "material": "glass"}],
+        "lights": [{"type": "environment", "radiance": [1, 1, 1]}]})
+    result = ps.render(scene, spp=512, seed=1, spectral=True)
+    mean = result.image.mean(axis=(0, 1))
+    error = np.sqrt(result.variance.sum(axis=(0, 1))) / (8 * 8)
+    assert np.all(np.abs(mean - 1.0) < 4 * error) and np.all(error < 0.02), (mean, error)
 
 
 def test_prism_scene_spreads_the_spectrum_in_order():

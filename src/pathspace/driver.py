@@ -145,7 +145,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
     _tune_allocator()
     camera = scene.camera
     film = Film(camera.width, camera.height, covariance=mode.film_covariance)
-    scene.accel  # build the BVH before the clock starts
+    integrator.prepare(scene)  # build the BVHs it needs before the clock starts
     start = _time.perf_counter()
     deadline = None if time is None else start + time
 
@@ -250,7 +250,7 @@ def _colour_mode(scene: Scene, spectral: bool | None, wavelength_sampling: str):
         spectral = bool(reasons)
         reason = "; ".join(reasons) if reasons else "every colour in the scene is RGB and nothing disperses"
     else:
-        reason = "asked for" + (f" ({'; '.join(reasons)})" if reasons and not spectral else "")
+        reason = "asked for" + (f" (the scene: {'; '.join(reasons)})" if reasons else "")
         if reasons and not spectral:
             reason += ": spectra are reduced to RGB, dispersion uses the index at 550 nm"
     return (SpectralMode(wavelength_sampling) if spectral else RGBMode()), reason

@@ -279,6 +279,8 @@ class Cauchy:
     def __post_init__(self) -> None:
         if not (np.isfinite(self.a) and np.isfinite(self.b) and self.a > 0):
             raise ValueError(f"cauchy: expected a > 0 and finite b, got {self.a!r}, {self.b!r}")
+        if np.any(self(GRID) <= 0):
+            raise ValueError(f"cauchy: a = {self.a!r}, b = {self.b!r} give an index <= 0 within 360-830 nm")
 
     def __call__(self, wavelength_nm: np.ndarray) -> np.ndarray:
         um = np.asarray(wavelength_nm, dtype=np.float64) * 1e-3
@@ -432,6 +434,9 @@ class RGBMode:
         """Film values (3, k) of finished paths ``lanes`` with radiance (3, k)."""
         return radiance
 
+    def terminate_secondary(self, paths, lanes: np.ndarray) -> None:
+        """Nothing to do: RGB paths carry no wavelengths (dispersion uses one index)."""
+
 
 class SpectralMode:
     """Render spectrally: each path carries 4 hero-sampled wavelengths; the film accumulates CIE XYZ."""
@@ -458,6 +463,22 @@ class SpectralMode:
 
     def colours(self, paths) -> SpectralColours:
         return SpectralColours(paths.wavelengths, paths.wavelength_index, paths.wavelength_frac)
+
+    def terminate_secondary(self, paths, lanes: np.ndarray) -> None:
+        """Keep only the hero wavelength of the paths where ``lanes`` (N,) bool is set.
+
+        A dispersive interface sent the path along the hero's direction, which
+        the other wavelengths would not take.  As in pbrt-v4
+        (SampledWavelengths::TerminateSecondary), the secondaries' densities
+        become 0 -- they drop out of the film sum -- and the hero's is divided
+        by 4, so it stands for all four.  This happens once per path: later
+        dispersive interfaces find the secondaries already terminated.
+        """
+        pdf = paths.wavelength_pdf
+        first = lanes & (pdf[1] > 0)
+        if first.any():
+            pdf[0, first] /= WAVELENGTHS_PER_PATH
+            pdf[1:, first] = 0.0
 
     def to_film(self, radiance: np.ndarray, paths, lanes: np.ndarray) -> np.ndarray:
         return radiance_to_xyz(radiance, *(np.take(a, lanes, axis=1) for a in (

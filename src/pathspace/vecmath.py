@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["dot", "orthonormal_basis", "Frame", "offset_along"]
+__all__ = ["dot", "orthonormal_basis", "Frame", "leave_distance", "segment_span", "MIN_LEAVING_COS"]
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -48,11 +48,22 @@ class Frame:
         return v[0] * self.s + v[1] * self.t + v[2] * self.n
 
 
-def offset_along(p: np.ndarray, n: np.ndarray, side: np.ndarray, epsilon: float) -> np.ndarray:
-    """Points p moved by ``epsilon`` along the unit normals n, to the side where ``side`` > 0.
+# Rays leaving within this cosine of a surface's tangent plane start at the distance they would at
+# this cosine: closer to grazing, epsilon / |cos| would skip geometry near the surface.
+MIN_LEAVING_COS = 1e-3
 
-    Used to start rays off a surface so they cannot re-hit it: ``side`` is the
-    dot product of the normal with the direction the ray will leave in.
-    """
-    step = np.where(side > 0, np.float32(epsilon), np.float32(-epsilon))
-    return p + n * step
+
+def leave_distance(epsilon: np.ndarray, cos: np.ndarray) -> np.ndarray:
+    """Distance (float32) along a ray leaving a surface at which it starts: epsilon / |cos| (see
+    ``pathspace.scene.mesh.RAY_OFFSET_RELATIVE``); ``cos`` is between the ray and the surface normal."""
+    return (epsilon / np.maximum(np.abs(cos), np.float32(MIN_LEAVING_COS))).astype(np.float32)
+
+
+def segment_span(start_eps, start_cos, end_eps, end_cos, length) -> tuple[np.ndarray, np.ndarray]:
+    """(tmin, tmax), as fractions of the segment, of a shadow ray p -> q that must not see the surfaces
+    at either end; ``*_eps`` are the surfaces' ray offsets (0 at points off any surface, like point
+    lights and lens points) and ``*_cos`` the cosines there; ``length`` = |q - p|."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tmin = np.where(length > 0, leave_distance(start_eps, start_cos) / length, 0.0)
+        tmax = np.where(length > 0, 1.0 - leave_distance(end_eps, end_cos) / length, 0.0)
+    return tmin.astype(np.float32), tmax.astype(np.float32)

@@ -110,8 +110,10 @@ class MaterialLanes:
             model, _, params = self.groups[0]
             return model.sample(params, surface, u, mode)
         out = BSDFSample(np.zeros((3, self.count), dtype=np.float32), np.zeros((self.channels, self.count)),
-                         np.zeros(self.count), np.zeros(self.count, dtype=bool))
+                         np.zeros(self.count), np.zeros(self.count, dtype=bool), np.zeros(self.count, dtype=bool))
         for model, idx, params in self.groups:
             s = model.sample(params, surface.take(idx), u[:, idx], mode)
             out.wi[:, idx], out.weight[:, idx], out.pdf[idx], out.delta[idx] = s.wi, s.weight, s.pdf, s.delta
+            if s.terminated is not None:
+                out.terminated[idx] = s.terminated
         return out

@@ -43,13 +43,15 @@ class BSDFSample:
     f |cos theta_i| / pdf (zero for failed samples); ``pdf`` (N,) float64
     solid-angle density (for delta lobes: the discrete probability of the
     chosen lobe); ``delta`` (N,) bool, whether the sampled lobe is a delta
-    (its pdf is not a density and it cannot be reached by other strategies).
+    (its pdf is not a density and it cannot be reached by other strategies);
+    ``terminated`` (N,) bool or None: the sample kept only the hero wavelength.
     """
 
     wi: np.ndarray
     weight: np.ndarray
     pdf: np.ndarray
     delta: np.ndarray
+    terminated: np.ndarray | None = None  # (N,) bool: a dispersive interface terminated secondary wavelengths
 
 
 class Surface:

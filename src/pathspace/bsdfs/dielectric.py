@@ -11,9 +11,11 @@ in "radiance" mode the refracted weight is 1 / eta^2; in "importance" mode
 
 Dispersion: in spectral rendering the index, and so the refracted direction,
 depends on the wavelength; the path follows its hero wavelength (the first
-of its four) and the others are terminated -- their weights become 0 and the
-hero's is multiplied by 4, which keeps the estimate unbiased (Wilkie et al.
-2014; pbrt-v4's TerminateSecondary).  RGB rendering uses the index at 550 nm.
+of its four) and the others are terminated: their weights become 0 and the
+sample reports ``terminated``, on which the integrator makes the hero stand
+for all four wavelengths once per path (Wilkie et al. 2014; pbrt-v4's
+TerminateSecondary; see ``SpectralMode.terminate_secondary``).  RGB rendering
+uses the index at 550 nm.
 """
 from __future__ import annotations
 
@@ -103,7 +105,8 @@ class Dielectric:
         scale = np.ones_like(eta) if mode == "importance" else 1.0 / (eta * eta)
         count = wi.shape[1]
         weight = np.repeat(np.where(reflects, 1.0, scale)[None, :], params.channels, axis=0)
+        terminated = None
         if params.dispersive.any() and params.channels == WAVELENGTHS_PER_PATH:
-            weight[0] *= np.where(params.dispersive, WAVELENGTHS_PER_PATH, 1.0)
             weight[1:] *= ~params.dispersive
-        return BSDFSample(wi.astype(np.float32), weight, pdf, np.ones(count, dtype=bool))
+            terminated = params.dispersive
+        return BSDFSample(wi.astype(np.float32), weight, pdf, np.ones(count, dtype=bool), terminated)

@@ -38,7 +38,11 @@ class SubpathPdfs:
 
 @dataclass
 class Connections:
-    """One row per connection: strategy, lane, and the densities it changes (see ext/mis.c)."""
+    """One row per connection: strategy, lane, and the densities it changes (see ext/mis.c).
+
+    ``light_is_delta`` (passed beside) is per connection too: whether the light
+    at the path's x_0 cannot be hit by rays.
+    """
 
     s: np.ndarray
     t: np.ndarray
@@ -108,7 +112,7 @@ def mis_weights_reference(c: Connections, light: SubpathPdfs, eye: SubpathPdfs, 
         eo, ei = eye.offset[lane], eye.offset[lane + 1]
         lf, lr, ld = light.fwd[lo:hi], light.rev[lo:hi], light.delta[lo:hi]
         ef, er, ed = eye.fwd[eo:ei], eye.rev[eo:ei], eye.delta[eo:ei]
-        if ((s == 0 and light_is_delta[lane]) or (t == 0 and camera_is_delta)
+        if ((s == 0 and light_is_delta[m]) or (t == 0 and camera_is_delta)
                 or (s >= 1 and s - 1 < len(ld) and ld[s - 1]) or (t >= 1 and t - 1 < len(ed) and ed[t - 1])):
             continue
         total, r = 0.0, (1.0, 0)
@@ -125,7 +129,7 @@ def mis_weights_reference(c: Connections, light: SubpathPdfs, eye: SubpathPdfs, 
             rev = c.qs_rev[m] if i == s - 1 else (c.qs_minus_rev[m] if i == s - 2 else lr[i])
             r = times(r, remap0(rev), remap0(fwd))
             delta_here = False if i == s - 1 else bool(ld[i])
-            delta_before = bool(ld[i - 1]) if i > 0 else bool(light_is_delta[lane])
+            delta_before = bool(ld[i - 1]) if i > 0 else bool(light_is_delta[m])
             total += term(r) if (not delta_here and not delta_before) else 0.0
         out[m] = 1.0 / (1.0 + total)
     return out

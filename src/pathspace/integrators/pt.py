@@ -10,7 +10,8 @@ light_sampling : "mis" (default), "nee", "none" or "mixture"
     "mis": next-event estimation (one light sample and shadow ray per vertex)
     and BSDF sampling, combined by multiple importance sampling (Veach 1997,
     ch. 9);  "nee": next-event estimation alone (emitters hit by BSDF samples
-    are ignored past the first segment);  "none": BSDF sampling alone (lights
+    count only after the camera and delta lobes, where light sampling cannot
+    produce the path);  "none": BSDF sampling alone (lights
     are found by chance; point, spot and directional lights are never found);
     "mixture": one direction per vertex from the mixture density
     alpha p_light + (1 - alpha) p_bsdf, weighted by the full mixture density
@@ -21,8 +22,9 @@ mis : "power" (default), "balance" or "uniform"
     strategies 1/2 where both can produce the path.
 mis_beta : float, default 2
     Exponent of the power heuristic.
-mixture_alpha : float in [0, 1], default 0.5
-    Probability of sampling a light direction in "mixture".
+mixture_alpha : float in [0, 1), default 0.5
+    Probability of sampling a light direction in "mixture" (1 is refused: it
+    would never sample the directions no light lies in, i.e. indirect light).
 diffuse_sampling : "cosine" (default) or "uniform"
     BSDF sampling technique of diffuse surfaces.
 light_selection : "power" (default) or "uniform"
@@ -31,7 +33,10 @@ light_measure : "area" (default) or "solid_angle"
     How a point on an emitting triangle is sampled.
 rr, rr_depth, rr_probability, rr_cap
     Russian roulette policy and its parameters (see :mod:`pathspace.roulette`);
-    default: throughput-based survival (pbrt-v4's rule) from depth 5.
+    default: throughput-based survival (pbrt-v4's rule) from depth 5.  The
+    albedo it uses is the BSDF sample's weight, also under mixture sampling
+    (whose weight f / p_mix is tiny toward bright lights, the directions that
+    matter most).
 
 Every wavefront lane carries one path.  Each bounce is a handful of array
 operations over the live lanes, grouped by material kind, followed by
@@ -55,7 +60,7 @@ from ..lights import MEASURES, SELECTIONS
 from ..mis import HEURISTICS, mis_weight
 from ..roulette import RussianRoulette
 from ..sampler import StreamSampler
-from ..vecmath import dot, offset_along
+from ..vecmath import dot, leave_distance, segment_span
 from .base import TILE_PIXELS, WorkItem
 from .wavefront import ItemBook, Lanes
 
@@ -101,8 +106,8 @@ class PathTracer:
                 raise ValueError(f"{name}: expected one of {choices}, got {getattr(self, name)!r}")
         if not (isinstance(self.mis_beta, (int, float)) and np.isfinite(self.mis_beta) and self.mis_beta > 0):
             raise ValueError(f"mis_beta: expected a finite number > 0, got {self.mis_beta!r}")
-        if not (isinstance(self.mixture_alpha, (int, float)) and 0.0 <= self.mixture_alpha <= 1.0):
-            raise ValueError(f"mixture_alpha: expected a number in [0, 1], got {self.mixture_alpha!r}")
+        if not (isinstance(self.mixture_alpha, (int, float)) and 0.0 <= self.mixture_alpha < 1.0):
+            raise ValueError(f"mixture_alpha: expected a number in [0, 1), got {self.mixture_alpha!r}")
         self.roulette = RussianRoulette(self.rr, self.rr_depth, self.rr_probability, self.rr_cap)
 
     # -- description -------------------------------------------------------------------------------
@@ -137,6 +142,12 @@ class PathTracer:
             raise ValueError(f"light_sampling={self.light_sampling!r} cannot reach point, spot or directional "
                              "lights (no ray can hit them); use 'mis' or 'nee'")
 
+    def prepare(self, scene) -> None:
+        """Build the acceleration structures this estimator uses on ``scene``."""
+        scene.accel
+        if self.light_sampling == "mixture" and scene.lights.area.count:
+            scene.emitter_accel
+
     # -- rendering ---------------------------------------------------------------------------------
 
     def render_stream(self, scene, next_item, seed: int, mode, counters: dict) -> Iterator[tuple[WorkItem, np.ndarray]]:
@@ -148,7 +159,6 @@ class PathTracer:
         are alive.  Adds ray and truncation counts to ``counters``.
         """
         lights = scene.lights
-        eps = np.float32(scene.ray_offset)
         options = {"diffuse_sampling": self.diffuse_sampling}
         strategy = self.light_sampling if lights.count else "none"
         env = lights.environment is not None
@@ -174,16 +184,15 @@ class PathTracer:
                     paths.extend(new)
             if paths is None or not paths.size:
                 break
-            counters["rays"] += self._bounce(scene, paths, sampler, book, strategy, env, eps, mode, options,
-                                             counters)
+            counters["rays"] += self._bounce(scene, paths, sampler, book, strategy, env, mode, options, counters)
             yield from book.finished()
 
-    def _bounce(self, scene, paths, sampler, book, strategy, env, eps, mode, options, counters) -> int:
+    def _bounce(self, scene, paths, sampler, book, strategy, env, mode, options, counters) -> int:
         """Advance every path by one segment: trace, gather emission, sample lights and the BSDF, roulette."""
         mesh, lights, table = scene.mesh, scene.lights, scene.materials
         colours = mode.colours(paths)
         paths.depth += 1
-        hits = scene.accel.intersect(paths.origin, paths.direction, normals=False, threads=1)
+        hits = scene.accel.intersect(paths.origin, paths.direction, paths.tmin, normals=False, threads=1)
         rays = paths.size
         hit = hits.prim >= 0
         if env and not hit.all():
@@ -194,13 +203,13 @@ class PathTracer:
         if not hit.all():
             alive = np.flatnonzero(hit)
             _retire(book, paths, end, mode)
-            paths.keep(alive, stale=("origin",))  # every surviving path gets a new origin below
+            paths.keep(alive, stale=("tmin",))  # every surviving path gets a new ray below
             sampler.keep(alive)
             prim, b1, b2 = prim.take(alive), b1.take(alive), b2.take(alive)
             if not paths.size:
                 return rays
             colours = mode.colours(paths)
-        p, normal = mesh.hit_geometry(prim, b1, b2)
+        p, normal, eps = mesh.hit_geometry(prim, b1, b2)
         cos_o = -dot(normal, paths.direction)
         if lights.area.count:
             self._emission(scene, prim, p, cos_o, paths, strategy, colours)
@@ -209,10 +218,10 @@ class PathTracer:
             counters["truncated"] += int(np.count_nonzero(stop & (paths.depth >= SAFETY_DEPTH)))
             alive = np.flatnonzero(~stop)
             _retire(book, paths, stop, mode)
-            paths.keep(alive, stale=("origin",))
+            paths.keep(alive, stale=("tmin",))
             sampler.keep(alive)
-            prim, p, normal, cos_o = prim.take(alive), np.take(p, alive, axis=1), np.take(normal, alive, axis=1), \
-                cos_o.take(alive)
+            prim, p, normal, eps, cos_o = (prim.take(alive), np.take(p, alive, axis=1),
+                                           np.take(normal, alive, axis=1), eps.take(alive), cos_o.take(alive))
             if not paths.size:
                 return rays
             colours = mode.colours(paths)
@@ -225,18 +234,21 @@ class PathTracer:
             rays += paths.size
 
         sample = materials.sample(surface, u[3:6])
+        # Roulette looks at the BSDF sample's weight (an albedo estimate): a mixture weight f / p_mix is
+        # tiny exactly where a bright light about to be hit makes up for it, and would end such paths.
+        albedo = sample.weight
         if strategy == "mixture":
-            self._mixture(scene, materials, p, surface, sample, u, eps, colours)
+            self._mixture(scene, materials, p, eps, surface, sample, u, colours)
         weight = sample.weight
+        rr_throughput = paths.beta * albedo
         paths.beta = paths.beta * weight
         paths.pdf_prev, paths.delta_prev, paths.direction = sample.pdf, sample.delta, sample.wi
-        if table.transmissive:
-            paths.origin = offset_along(p, surface.n, dot(surface.n, sample.wi), eps)
-        else:  # every sampled direction leaves on the side of wo
-            paths.origin = p + surface.n * eps
-        paths.prev_p = p
+        if sample.terminated is not None:
+            mode.terminate_secondary(paths, sample.terminated)
+        paths.origin = p
+        paths.tmin = leave_distance(eps, dot(surface.n, sample.wi))
 
-        survival = self.roulette.survival(paths.depth, paths.beta, weight)
+        survival = self.roulette.survival(paths.depth, rr_throughput, albedo)
         keep = np.maximum(np.maximum(weight[0], weight[1]), weight[2]) > 0
         if survival is not None:
             keep &= u[6] < survival
@@ -266,7 +278,7 @@ class PathTracer:
             return
         le = lights.area.emitted(emitter.take(emits), cos_o.take(emits), colours.take(emits))
         if strategy == "mis":
-            pdf_light = lights.pdf_hit(prim.take(emits), np.take(paths.prev_p, emits, axis=1),
+            pdf_light = lights.pdf_hit(prim.take(emits), np.take(paths.origin, emits, axis=1),
                                        np.take(p, emits, axis=1), self.light_selection, self.light_measure)
         else:
             pdf_light = None
@@ -298,26 +310,36 @@ class PathTracer:
         useful = ls.facing & (scale > 0) & (np.maximum(np.maximum(f_cos[0], f_cos[1]), f_cos[2]) > 0)
         lanes = np.flatnonzero(useful)
         if lanes.size:
-            n = np.take(surface.n, lanes, axis=1)
-            wi = np.take(ls.wi, lanes, axis=1)
-            start = np.take(p, lanes, axis=1) + n * eps  # f > 0: wi leaves on the side of n
-            # Shadow rays end just off the light's surface on the receiver's side (point lights have no
-            # surface, so their normal is zero); rays toward infinite lights have no end.
-            end = offset_along(np.take(ls.point, lanes, axis=1), np.take(ls.normal, lanes, axis=1),
-                               ls.cos_light.take(lanes), eps)
-            finite = np.isfinite(ls.distance.take(lanes))
-            if finite.all():
-                blocked = scene.accel.occluded(start, end - start, 0.0, 1.0, threads=1)
-            else:
-                blocked = scene.accel.occluded(start, np.where(finite, end - start, wi), 0.0,
-                                               np.where(finite, 1.0, np.inf), threads=1)
-            useful[lanes[blocked]] = False
+            useful[lanes[self._shadowed(scene, p, eps, surface, ls, lanes)]] = False
         scale = np.where(useful, scale, 0.0)
-        return beta * f_cos * (ls.value * scale)
+        return np.where(useful, beta * f_cos * (ls.value * scale), 0.0)
+
+    @staticmethod
+    def _shadowed(scene, p, eps, surface, ls, lanes) -> np.ndarray:
+        """Whether the segments from receivers ``p`` to light samples ``ls`` (at ``lanes``) are blocked.
+
+        Segments leave the receiver's surface and stop short of the light's
+        (point lights have no surface: their offset is 0); rays toward
+        infinite lights have no end.
+        """
+        start = np.take(p, lanes, axis=1)
+        wi = np.take(ls.wi, lanes, axis=1)
+        distance = ls.distance.take(lanes)
+        cos_start = dot(np.take(surface.n, lanes, axis=1), wi)
+        finite = np.isfinite(distance)
+        if finite.all():
+            tmin, tmax = segment_span(eps.take(lanes), cos_start, ls.epsilon.take(lanes), ls.cos_light.take(lanes),
+                                      distance)
+            return scene.accel.occluded(start, np.take(ls.point, lanes, axis=1) - start, tmin, tmax, threads=1)
+        length = np.where(finite, distance, 1.0)
+        tmin, tmax = segment_span(eps.take(lanes), cos_start, ls.epsilon.take(lanes), ls.cos_light.take(lanes),
+                                  length)
+        direction = np.where(finite, np.take(ls.point, lanes, axis=1) - start, wi)
+        return scene.accel.occluded(start, direction, tmin, np.where(finite, tmax, np.inf), threads=1)
 
     # -- mixture sampling --------------------------------------------------------------------------
 
-    def _mixture(self, scene, materials, p, surface, sample, u, eps, colours) -> None:
+    def _mixture(self, scene, materials, p, eps, surface, sample, u, colours) -> None:
         """Turn BSDF samples into samples of the mixture alpha p_light + (1 - alpha) p_bsdf (in place).
 
         With probability alpha a lane takes the direction of a light sample
@@ -330,8 +352,7 @@ class PathTracer:
             use_light &= ~materials.delta
         wi = np.where(use_light, ls.wi, sample.wi)
         f_cos, pdf_bsdf = materials.eval(surface, wi)
-        origin = offset_along(p, surface.n, dot(surface.n, wi), eps)
-        pdf_light = self._light_density(scene, p, origin, wi)
+        pdf_light = self._light_density(scene, p, leave_distance(eps, dot(surface.n, wi)), wi)
         alpha = self.mixture_alpha
         pdf = alpha * pdf_light + (1.0 - alpha) * pdf_bsdf
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -341,7 +362,7 @@ class PathTracer:
         sample.weight = np.where(delta, sample.weight, weight)
         sample.pdf = np.where(delta, sample.pdf, pdf)
 
-    def _light_density(self, scene, receivers, origin, direction):
+    def _light_density(self, scene, receivers, tmin, direction):
         """Solid-angle density with which light sampling at ``receivers`` produces each direction.
 
         Sums over every emitting triangle the ray meets (found with an
@@ -354,8 +375,7 @@ class PathTracer:
             return total
         emitters = scene.emitter_accel
         lanes = np.arange(count)
-        tmin = np.zeros(count, dtype=np.float32)
-        o, d = origin, direction
+        o, d = receivers, direction
         while lanes.size:
             h = emitters.intersect(o, d, tmin, np.inf, normals=False, threads=1)
             found = np.flatnonzero(h.prim >= 0)
@@ -369,7 +389,7 @@ class PathTracer:
         return total
 
 
-PATH_FIELDS = ("ticket", "depth", "origin", "direction", "prev_p", "beta", "radiance", "pdf_prev", "delta_prev")
+PATH_FIELDS = ("ticket", "depth", "origin", "direction", "tmin", "beta", "radiance", "pdf_prev", "delta_prev")
 
 
 def _new_paths(channels: int, tickets: np.ndarray, origin: np.ndarray, direction: np.ndarray):
@@ -377,7 +397,7 @@ def _new_paths(channels: int, tickets: np.ndarray, origin: np.ndarray, direction
     n = tickets.size
     return dict(ticket=tickets, depth=np.zeros(n, dtype=np.int32),
                 origin=np.ascontiguousarray(origin, dtype=np.float32), direction=direction,
-                prev_p=np.ascontiguousarray(origin, dtype=np.float32),  # previous vertex (un-offset), for light pdfs
+                tmin=np.zeros(n, dtype=np.float32),  # where the ray starts (see leave_distance)
                 beta=np.ones((channels, n)),                              # path throughput
                 radiance=np.zeros((channels, n)),                         # radiance gathered so far
                 pdf_prev=np.zeros(n),                    # solid-angle pdf of the sampled direction of the current ray

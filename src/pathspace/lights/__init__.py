@@ -20,24 +20,53 @@ import numpy as np
 
 from .. import warp
 from ..spectra import ColourTable
-from ..vecmath import dot
+from ..vecmath import dot, leave_distance, orthonormal_basis
 from .area import MEASURES, AreaLights
 from .delta import DirectionalLight, PointLight, SpotLight
 from .environment import Environment
 
-__all__ = ["AreaLights", "DirectionalLight", "Environment", "LightSample", "LightSet", "MEASURES", "PointLight",
-           "SELECTIONS", "SpotLight"]
+__all__ = ["AreaLights", "DirectionalLight", "EmissionSample", "Environment", "LightSample", "LightSet", "MEASURES",
+           "PointLight", "SELECTIONS", "SpotLight"]
 
 SELECTIONS = ("power", "uniform")
 AREA, POINT, SPOT, DIRECTIONAL, ENVIRONMENT = range(5)
 
 
+class EmissionSample:
+    """A ray leaving a light (for light subpaths), one per lane.
+
+    ``pdf_pos``: density of the origin including the selection pmf -- in area
+    measure for area lights, 1 x pmf for point and spot lights (a delta),
+    and for infinite lights the density on the disk the rays start from.
+    ``pdf_dir``: solid-angle density of the direction (1 for a directional
+    light's delta direction).  ``value``: radiance (area, environment),
+    intensity (point, spot) or irradiance (directional) carried by the ray.
+    The ray starts at ``point``, ``tmin`` along ``direction`` (see
+    :func:`pathspace.vecmath.leave_distance`); for infinite lights ``point``
+    lies on a disk outside the scene and ``normal`` is the direction.
+    """
+
+    __slots__ = ("point", "tmin", "normal", "direction", "value", "pdf_pos", "pdf_dir", "entity", "infinite",
+                 "cos_light")
+
+    def __init__(self, **fields):
+        for name in self.__slots__:
+            setattr(self, name, fields[name])
+
+
+def _sample_cosine(n: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Cosine-distributed unit directions about unit normals n (3, N), float32."""
+    d = n + warp.square_to_uniform_sphere(u)
+    length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    return np.where(length > 1e-6, d / np.maximum(length, np.float32(1e-6)), n)
+
+
 class LightSample:
     """One light sample per receiver (N lanes)."""
 
-    __slots__ = ("wi", "distance", "point", "normal", "value", "facing", "pdf", "delta", "cos_light")
+    __slots__ = ("wi", "distance", "point", "normal", "value", "facing", "pdf", "delta", "cos_light", "epsilon")
 
-    def __init__(self, wi, distance, point, normal, value, facing, pdf, delta, cos_light):
+    def __init__(self, wi, distance, point, normal, value, facing, pdf, delta, cos_light, epsilon):
         self.wi = wi                # (3, N) float32 unit, receiver -> light
         self.distance = distance    # (N,) float32; inf for directional and environment samples
         self.point = point          # (3, N) float32 point on the light (finite lights)
@@ -47,6 +76,7 @@ class LightSample:
         self.pdf = pdf              # (N,) float64 solid-angle pdf times the selection pmf; pmf alone if delta
         self.delta = delta          # (N,) bool
         self.cos_light = cos_light  # (N,) float32 dot(normal, -wi) for area lights; 1 otherwise
+        self.epsilon = epsilon      # (N,) float32 ray offset of the light's surface (area lights; else 0)
 
 
 class LightSet:
@@ -149,6 +179,7 @@ class LightSet:
         pdf = np.zeros(count)
         delta = np.zeros(count, dtype=bool)
         cos_light = np.ones(count, dtype=np.float32)
+        epsilon = np.zeros(count, dtype=np.float32)
         for k in np.unique(kind):
             lanes = np.flatnonzero(kind == k)
             idx, ref, uu = self.index.take(entity.take(lanes)), np.take(receivers, lanes, axis=1), u[1:3, lanes]
@@ -157,6 +188,7 @@ class LightSet:
                 s = self._sample_area(idx, ref, uu, pmf.take(lanes), mine, measure)
                 wi[:, lanes], distance[lanes], point[:, lanes], normal[:, lanes] = s.wi, s.distance, s.point, s.normal
                 value[:, lanes], facing[lanes], pdf[lanes], cos_light[lanes] = s.value, s.facing, s.pdf, s.cos_light
+                epsilon[lanes] = s.epsilon
                 continue
             if k == ENVIRONMENT:
                 d = warp.square_to_uniform_sphere(uu)
@@ -187,13 +219,13 @@ class LightSet:
             distance[lanes] = dist
             point[:, lanes] = position
             value[:, lanes] = mine.lookup(intensity, idx) * (falloff / dist2)
-        return LightSample(wi, distance, point, normal, value, facing, pdf, delta, cos_light)
+        return LightSample(wi, distance, point, normal, value, facing, pdf, delta, cos_light, epsilon)
 
     def _sample_area(self, emitter, receivers, u, pmf, colours, measure) -> LightSample:
         point, normal, wi, distance, cos_light, pdf = self.area.sample(emitter, receivers, u, measure)
         facing = self.area.two_sided.take(emitter) | (cos_light > 0)
         return LightSample(wi, distance, point, normal, self.area.radiance_of(emitter, colours), facing,
-                           pdf * pmf, np.zeros(pmf.shape, dtype=bool), cos_light)
+                           pdf * pmf, np.zeros(pmf.shape, dtype=bool), cos_light, self.area.table[12].take(emitter))
 
     def pdf_hit(self, triangles: np.ndarray, receivers: np.ndarray, points: np.ndarray, selection: str = "power",
                 measure: str = "area") -> np.ndarray:
@@ -219,3 +251,119 @@ class LightSet:
         if self.environment is None:
             return np.zeros((colours.channels, count))
         return colours.lookup(self.environment_table, np.zeros(count, dtype=np.int64))
+
+    def sample_emission(self, u: np.ndarray, colours, selection: str, scene_center: np.ndarray) -> EmissionSample:
+        """Sample rays leaving the lights: an entity by ``selection``, a point, a direction (u: (5, N))."""
+        count = u.shape[1]
+        entity = np.minimum(np.searchsorted(self._cdfs[selection], u[0], side="right"), self.count - 1)
+        pmf = self.pmf(selection).take(entity)
+        kind, index = self.kind.take(entity), self.index.take(entity)
+        point = np.zeros((3, count), dtype=np.float32)
+        tmin = np.zeros(count, dtype=np.float32)
+        normal = np.zeros((3, count), dtype=np.float32)
+        direction = np.zeros((3, count), dtype=np.float32)
+        value = np.zeros((colours.channels, count))
+        pdf_pos = np.zeros(count)
+        pdf_dir = np.ones(count)
+        cos_light = np.ones(count)
+        radius = self.scene_radius * 1.01 + 1e-30
+        for k in np.unique(kind):
+            lanes = np.flatnonzero(kind == k)
+            idx, mine = index.take(lanes), colours.take(lanes)
+            if k == AREA:
+                rows = np.take(self.area.table, idx, axis=1)
+                b1, b2 = warp.square_to_uniform_triangle(u[1:3, lanes])
+                p = rows[0:3] + rows[3:6] * b1.astype(np.float32) + rows[6:9] * b2.astype(np.float32)
+                n = rows[9:12]
+                two = self.area.two_sided.take(idx)
+                side = np.where(two & (u[3, lanes] < 0.5), np.float32(-1), np.float32(1))
+                d = _sample_cosine(n * side, np.stack((np.where(two, (u[3, lanes] * 2) % 1.0, u[3, lanes]),
+                                                       u[4, lanes])))
+                cos = np.abs(dot(n, d)).astype(np.float64)
+                point[:, lanes], normal[:, lanes], direction[:, lanes] = p, n, d
+                tmin[lanes] = leave_distance(rows[12], dot(n, d))
+                value[:, lanes] = self.area.radiance_of(idx, mine)
+                pdf_pos[lanes] = pmf.take(lanes) / self.area.area.take(idx)
+                pdf_dir[lanes] = cos * warp.INV_PI * np.where(two, 0.5, 1.0)
+                cos_light[lanes] = cos
+            elif k in (POINT, SPOT):
+                lights = self.points if k == POINT else self.spots
+                position = np.array([l.position for l in lights], dtype=np.float64).T.take(idx, axis=1)
+                if k == POINT:
+                    d = warp.square_to_uniform_sphere(u[1:3, lanes])
+                    density = np.full(lanes.size, warp.INV_FOUR_PI)
+                    falloff = np.ones(lanes.size)
+                else:
+                    d, density, falloff = self._sample_spot(idx, u[1:3, lanes])
+                point[:, lanes] = position
+                direction[:, lanes] = d
+                value[:, lanes] = mine.lookup(self.point_intensity if k == POINT else self.spot_intensity, idx) * falloff
+                pdf_pos[lanes] = pmf.take(lanes)
+                pdf_dir[lanes] = density
+            else:  # directional or environment: rays from a disk facing the scene, outside it
+                if k == DIRECTIONAL:
+                    d = np.array([l.unit_direction for l in self.directionals]).T.take(idx, axis=1).astype(np.float32)
+                    value[:, lanes] = mine.lookup(self.directional_irradiance, idx)
+                else:
+                    d = warp.square_to_uniform_sphere(u[1:3, lanes])
+                    value[:, lanes] = mine.lookup(self.environment_table, np.zeros(lanes.size, dtype=np.int64))
+                    pdf_dir[lanes] = warp.INV_FOUR_PI
+                s, t = orthonormal_basis(d.astype(np.float64))
+                r = radius * np.sqrt(u[3, lanes])
+                phi = 2 * np.pi * u[4, lanes]
+                start = scene_center[:, None] - d * radius + s * (r * np.cos(phi)) + t * (r * np.sin(phi))
+                point[:, lanes] = start
+                direction[:, lanes] = d
+                normal[:, lanes] = d
+                pdf_pos[lanes] = pmf.take(lanes) / (np.pi * radius * radius)
+        infinite = (kind == DIRECTIONAL) | (kind == ENVIRONMENT)
+        return EmissionSample(point=point, tmin=tmin, normal=normal, direction=direction, value=value,
+                              pdf_pos=pdf_pos, pdf_dir=pdf_dir, entity=entity, infinite=infinite, cos_light=cos_light)
+
+
+    def _sample_spot(self, idx: np.ndarray, u: np.ndarray):
+        """Directions uniform within each spot light's cone, their solid-angle density and the falloff."""
+        d = np.zeros((3, idx.size), dtype=np.float32)
+        density = np.zeros(idx.size)
+        falloff = np.zeros(idx.size)
+        for j in np.unique(idx):
+            lanes = np.flatnonzero(idx == j)
+            spot = self.spots[j]
+            cos_total = np.cos(np.radians(spot.cone_angle))
+            cos_theta = 1.0 - u[0, lanes] * (1.0 - cos_total)
+            sin_theta = np.sqrt(np.maximum(0.0, 1.0 - cos_theta * cos_theta))
+            phi = 2 * np.pi * u[1, lanes]
+            axis = np.repeat(spot.axis[:, None], lanes.size, axis=1)
+            s, t = orthonormal_basis(axis)
+            d[:, lanes] = s * (sin_theta * np.cos(phi)) + t * (sin_theta * np.sin(phi)) + axis * cos_theta
+            density[lanes] = 1.0 / (2 * np.pi * (1.0 - cos_total))
+            falloff[lanes] = spot.falloff(d[:, lanes].astype(np.float64))
+        return d, density, falloff
+
+
+    def emission_pdf_dir(self, entity: np.ndarray, normal: np.ndarray, direction: np.ndarray) -> np.ndarray:
+        """Solid-angle density with which :meth:`sample_emission` emits ``direction`` from finite lights ``entity``
+        (area: from a point with geometric normal ``normal``).  Infinite lights: the disk density instead (which
+        multiplies |cos| at the receiver rather than converting by distance)."""
+        kind, index = self.kind.take(entity), self.index.take(entity)
+        out = np.zeros(entity.size)
+        for k in np.unique(kind):
+            lanes = np.flatnonzero(kind == k)
+            idx = index.take(lanes)
+            if k == AREA:
+                cos = dot(np.take(normal, lanes, axis=1), np.take(direction, lanes, axis=1)).astype(np.float64)
+                two = self.area.two_sided.take(idx)
+                out[lanes] = np.where(two, np.abs(cos) * 0.5, np.maximum(cos, 0.0)) * warp.INV_PI
+            elif k == POINT:
+                out[lanes] = warp.INV_FOUR_PI
+            elif k == SPOT:
+                for j in np.unique(idx):
+                    mine = lanes[idx == j]
+                    spot = self.spots[j]
+                    cos_total = np.cos(np.radians(spot.cone_angle))
+                    inside = spot.axis @ np.take(direction, mine, axis=1).astype(np.float64) >= cos_total
+                    out[mine] = np.where(inside, 1.0 / (2 * np.pi * (1.0 - cos_total)), 0.0)
+            else:
+                radius = self.scene_radius * 1.01 + 1e-30
+                out[lanes] = 1.0 / (np.pi * radius * radius)
+        return out

@@ -12,14 +12,7 @@ from ..camera import PinholeCamera
 from ..lights import LightSet
 from .mesh import TriangleMesh
 
-__all__ = ["Scene", "RAY_OFFSET_RELATIVE"]
-
-# Rays leaving a surface start this far off it, relative to the largest
-# coordinate magnitude of the scene.  Float32 hit points are accurate to a few
-# units in the last place of that magnitude (~1e-7 relative); 2**-16 leaves a
-# wide margin while staying invisible.  Being relative, it keeps renders
-# invariant under scaling the scene.
-RAY_OFFSET_RELATIVE = 2.0 ** -16
+__all__ = ["Scene"]
 
 
 @dataclass
@@ -42,11 +35,6 @@ class Scene:
     lights: LightSet
     shape_names: list[str]
     source: str | None = None
-
-    @cached_property
-    def ray_offset(self) -> float:
-        """Distance by which rays are started off surfaces (see RAY_OFFSET_RELATIVE)."""
-        return float(RAY_OFFSET_RELATIVE * max(np.abs(self.mesh.vertices).max(), np.finfo(np.float32).tiny))
 
     @cached_property
     def accel(self) -> Accel:

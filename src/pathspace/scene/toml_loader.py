@@ -72,6 +72,10 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>",
     if not isinstance(light_list, list):
         raise top.error("expected an array of tables ([[lights]])", "lights")
     other_lights = [_light(Fields(table, f"lights[{i}]", source), base) for i, table in enumerate(light_list)]
+    environments = [i for i, light in enumerate(other_lights) if isinstance(light, Environment)]
+    if len(environments) > 1:
+        raise top.error(f"at most one environment light is supported, got {len(environments)} "
+                        f"(lights{environments})", "lights")
     top.finish()
 
     vertices, indices, material_ids, shape_ids, names = [], [], [], [], []
@@ -180,6 +184,9 @@ def _ior(fields: Fields):
     if not isinstance(value, dict):
         return fields.number("ior", 1.5, low=0.0, low_open=True)
     law = fields.sub("ior")
+    if not (law.has("cauchy") or law.has("sellmeier")):
+        raise fields.error("expected a number > 0 or a dispersion law: { cauchy = [a, b] } or "
+                           "{ sellmeier = { b = [...], c = [...] } }", "ior")
     if law.has("cauchy"):
         a, b = law.vector("cauchy", 2)
         result = _built(law, lambda: Cauchy(float(a), float(b)))
