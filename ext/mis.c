@@ -17,15 +17,20 @@
  * connection it needs joins two non-delta vertices (s' = 0: the light can be
  * hit; s' = k + 1: the camera can be hit).
  *
- * Inputs per connection m: s, t, lane, whether the light at x_0 can be hit
- * (light_is_delta: point, spot and directional lights cannot); the subpaths
+ * Inputs per connection m: s, t, lane, flags of the light at x_0 (LIGHT_DELTA:
+ * it cannot be hit by rays -- point, spot and directional lights;
+ * LIGHT_INFINITE: it lies at infinity -- environment and directional lights --
+ * so strategy (1, 1), which would join it to a camera point, cannot produce
+ * the path); the subpaths
  * of each lane as flat arrays (CSR offsets per lane) of p_fwd, p_rev and
  * delta; and the values that
  * change for this connection: p_fwd and p_rev of the two connection vertices
  * x_{s-1} ("qs") and x_s ("pt"), and p_rev of their neighbours x_{s-2} and
  * x_{s+1} (pbrt's ScopedAssignments).  The connection vertices are read from
  * these overrides only, so they need not exist in the subpath arrays (a fresh
- * light sample for s = 1, a lens sample for t = 1, a lens hit for t = 0).
+ * light sample for s = 1, a lens sample for t = 1, a lens hit for t = 0), and
+ * their own delta flags are not consulted where they end the path (s = 0: the
+ * eye vertex that found the light; t = 0: the lens a light subpath hit).
  */
 #include "native.h"
 
@@ -39,6 +44,7 @@
 #include <string.h>
 
 enum { H_BALANCE = 0, H_POWER = 1, H_UNIFORM = 2, H_SINGLE = 3, H_NONE = 4 };
+enum { LIGHT_DELTA = 1, LIGHT_INFINITE = 2 };
 
 static inline double remap0(double x) { return x != 0.0 ? x : 1.0; }
 
@@ -62,7 +68,7 @@ typedef struct {
     const int64_t *lane;
     const int64_t *light_offset, *eye_offset;
     const double *light_fwd, *light_rev, *eye_fwd, *eye_rev;
-    const uint8_t *light_delta, *eye_delta, *light_is_delta;
+    const uint8_t *light_delta, *eye_delta, *light_flags;
     const double *qs_fwd, *qs_rev, *qs_minus_rev, *pt_fwd, *pt_rev, *pt_minus_rev;
     int camera_is_delta;
     int heuristic;
@@ -99,10 +105,13 @@ static double weight_of(const MisBatch *b, npy_intp m)
     const uint8_t *ed = b->eye_delta + b->eye_offset[lane];
     int64_t light_len = b->light_offset[lane + 1] - b->light_offset[lane];
     int64_t eye_len = b->eye_offset[lane + 1] - b->eye_offset[lane];
+    int light_delta = b->light_flags[m] & LIGHT_DELTA;
+    /* Strategy (1, 1) of a path whose light lies at infinity: no camera point can be joined to it. */
+    int no_11 = (b->light_flags[m] & LIGHT_INFINITE) && s + t == 2;
     /* A strategy that cannot produce the path has weight 0: it would connect through a delta vertex,
      * hit a light that cannot be hit (s = 0), or hit a camera that cannot be hit (t = 0). */
-    if ((s == 0 && b->light_is_delta[m]) || (t == 0 && b->camera_is_delta) ||
-        (s >= 1 && s - 1 < light_len && ld[s - 1]) || (t >= 1 && t - 1 < eye_len && ed[t - 1]))
+    if ((s == 0 && light_delta) || (t == 0 && b->camera_is_delta) || (s == 1 && t == 1 && no_11) ||
+        (s >= 1 && t >= 1 && s - 1 < light_len && ld[s - 1]) || (t >= 1 && s >= 1 && t - 1 < eye_len && ed[t - 1]))
         return 0.0;
     double sum = 0.0;
     Ratio r = {1.0, 0};
@@ -114,7 +123,7 @@ static double weight_of(const MisBatch *b, npy_intp m)
         ratio_times(&r, remap0(rev), remap0(fwd));
         int delta_here = i == t - 1 ? 0 : ed[i];
         int valid = i > 0 ? (!delta_here && !ed[i - 1]) : (!delta_here && !b->camera_is_delta);
-        if (valid)
+        if (valid && !(i == 1 && no_11))
             sum += term(&r, b);
     }
     /* Light side: move the split toward the light (s' = s-1 .. 0). */
@@ -125,8 +134,8 @@ static double weight_of(const MisBatch *b, npy_intp m)
         double rev = i == s - 1 ? b->qs_rev[m] : (i == s - 2 ? b->qs_minus_rev[m] : lr[i]);
         ratio_times(&r, remap0(rev), remap0(fwd));
         int delta_here = i == s - 1 ? 0 : ld[i];
-        int delta_before = i > 0 ? ld[i - 1] : b->light_is_delta[m];
-        if (!delta_here && !delta_before)
+        int delta_before = i > 0 ? ld[i - 1] : light_delta;
+        if (!delta_here && !delta_before && !(i == 1 && no_11))
             sum += term(&r, b);
     }
     return 1.0 / (1.0 + sum);
@@ -153,7 +162,7 @@ PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs)
 {
     (void)module;
     static char *kwlist[] = {"s", "t", "lane", "light_offset", "light_fwd", "light_rev", "light_delta",
-                             "eye_offset", "eye_fwd", "eye_rev", "eye_delta", "light_is_delta",
+                             "eye_offset", "eye_fwd", "eye_rev", "eye_delta", "light_flags",
                              "qs_fwd", "qs_rev", "qs_minus_rev", "pt_fwd", "pt_rev", "pt_minus_rev",
                              "camera_is_delta", "heuristic", "beta", "target_s", "target_t", NULL};
     PyObject *o[18];

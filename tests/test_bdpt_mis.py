@@ -4,7 +4,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pathspace.integrators.bdpt_mis import Connections, SubpathPdfs, mis_weights, mis_weights_reference
+from pathspace.integrators.bdpt_mis import (LIGHT_DELTA, LIGHT_INFINITE, Connections, SubpathPdfs, mis_weights,
+                                            mis_weights_reference)
 
 
 def random_path(rng, k, delta_rate=0.25):
@@ -22,8 +23,8 @@ def strategy_batch(paths, heuristic_target=None):
     """Every strategy s = 0 .. k+1 of every path, as connections over per-(path, s) lanes."""
     rows, light_fwd, light_rev, light_delta, eye_fwd, eye_rev, eye_delta = [], [], [], [], [], [], []
     light_offset, eye_offset = [0], [0]
-    lane_light_delta = []
-    for path_index, (p_l, p_e, delta, light_is_delta) in enumerate(paths):
+    lane_light_flags = []
+    for path_index, (p_l, p_e, delta, light_flags) in enumerate(paths):
         k = len(p_l) - 1
         for s in range(k + 2):
             t = k + 1 - s
@@ -32,7 +33,7 @@ def strategy_batch(paths, heuristic_target=None):
             light_fwd += list(p_l[:s]); light_rev += list(p_e[:s]); light_delta += list(delta[:s])
             eye_fwd += list(p_e[::-1][:t]); eye_rev += list(p_l[::-1][:t]); eye_delta += list(delta[::-1][:t])
             light_offset.append(len(light_fwd)); eye_offset.append(len(eye_fwd))
-            lane_light_delta.append(light_is_delta)  # one connection per lane here
+            lane_light_flags.append(light_flags)  # one connection per lane here
             get = lambda a, i: a[i] if 0 <= i <= k else 0.0
             rows.append((path_index, s, t, lane, get(p_l, s - 1), get(p_e, s - 1), get(p_e, s - 2),
                          get(p_e, s), get(p_l, s), get(p_l, s + 1)))
@@ -41,17 +42,26 @@ def strategy_batch(paths, heuristic_target=None):
                               *rows[:, 4:].T)
     light = SubpathPdfs(np.array(light_offset), np.array(light_fwd), np.array(light_rev), np.array(light_delta))
     eye = SubpathPdfs(np.array(eye_offset), np.array(eye_fwd), np.array(eye_rev), np.array(eye_delta))
-    return rows[:, 0].astype(int), connections, light, eye, np.array(lane_light_delta)
+    return rows[:, 0].astype(int), connections, light, eye, np.array(lane_light_flags)
 
 
 def feasible(path, s, camera_is_delta):
-    p_l, p_e, delta, light_is_delta = path
+    """Whether strategy s can produce the path: s = 0 needs a light that can be hit, t = 0 a camera that
+    can be hit, (1, 1) a light at a finite point; every other connection two non-delta vertices."""
+    p_l, p_e, delta, light_flags = path
     k = len(p_l) - 1
     if s == 0:
-        return not light_is_delta
+        return not light_flags & LIGHT_DELTA
     if s == k + 1:
         return not camera_is_delta
+    if s == 1 and k == 1 and light_flags & LIGHT_INFINITE:
+        return False
     return not delta[s - 1] and not delta[s]
+
+
+def random_flags(rng):
+    """Light flags: mostly an area light; sometimes delta (point), infinite (environment) or both (directional)."""
+    return int(rng.choice([0, LIGHT_DELTA, LIGHT_INFINITE, LIGHT_DELTA | LIGHT_INFINITE], p=[0.6, 0.15, 0.15, 0.1]))
 
 
 @pytest.mark.parametrize("heuristic, beta", [("balance", 1.0), ("power", 2.0), ("power", 3.0), ("uniform", 1.0)])
@@ -62,9 +72,9 @@ def test_weights_partition_unity_over_feasible_strategies(heuristic, beta, camer
     for _ in range(400):
         k = int(rng.integers(1, 12)) if rng.random() < 0.9 else int(rng.integers(100, 260))
         p_l, p_e, delta = random_path(rng, k)
-        paths.append((p_l, p_e, delta, bool(rng.random() < 0.2)))
-    owner, connections, light, eye, light_is_delta = strategy_batch(paths)
-    w = mis_weights(connections, light, eye, light_is_delta, camera_is_delta, heuristic, beta)
+        paths.append((p_l, p_e, delta, random_flags(rng)))
+    owner, connections, light, eye, light_flags = strategy_batch(paths)
+    w = mis_weights(connections, light, eye, light_flags, camera_is_delta, heuristic, beta)
     assert np.all(np.isfinite(w)) and np.all((w >= 0) & (w <= 1))
     for index, path in enumerate(paths):
         mine = owner == index
@@ -79,9 +89,9 @@ def test_weights_partition_unity_over_feasible_strategies(heuristic, beta, camer
 @pytest.mark.parametrize("heuristic", ["balance", "power", "uniform", "single", "none"])
 def test_c_kernel_matches_the_numpy_reference(heuristic):
     rng = np.random.default_rng(11)
-    paths = [(*random_path(rng, int(rng.integers(1, 9))), bool(rng.random() < 0.2)) for _ in range(150)]
-    owner, connections, light, eye, light_is_delta = strategy_batch(paths)
-    args = (connections, light, eye, light_is_delta, False, heuristic, 2.5, (2, 3))
+    paths = [(*random_path(rng, int(rng.integers(1, 9))), random_flags(rng)) for _ in range(150)]
+    owner, connections, light, eye, light_flags = strategy_batch(paths)
+    args = (connections, light, eye, light_flags, False, heuristic, 2.5, (2, 3))
     fast, slow = mis_weights(*args), mis_weights_reference(*args)
     np.testing.assert_allclose(fast, slow, rtol=1e-12, atol=0)
 
@@ -89,9 +99,9 @@ def test_c_kernel_matches_the_numpy_reference(heuristic):
 def test_scale_invariance_of_ratios():
     """Scaling every density by the same factor (a scene scaled by 1/sqrt(factor)) leaves every weight unchanged."""
     rng = np.random.default_rng(3)
-    paths = [(*random_path(rng, 6, delta_rate=0.1), False) for _ in range(50)]
-    owner, connections, light, eye, light_is_delta = strategy_batch(paths)
-    base = mis_weights(connections, light, eye, light_is_delta, False)
+    paths = [(*random_path(rng, 6, delta_rate=0.1), 0) for _ in range(50)]
+    owner, connections, light, eye, light_flags = strategy_batch(paths)
+    base = mis_weights(connections, light, eye, light_flags, False)
     for factor in (1e-12, 1e12):
         scaled = lambda x: x * factor
         c2 = Connections(connections.s, connections.t, connections.lane,
@@ -99,14 +109,14 @@ def test_scale_invariance_of_ratios():
                                                                        "pt_rev", "pt_minus_rev")))
         l2 = SubpathPdfs(light.offset, scaled(light.fwd), scaled(light.rev), light.delta)
         e2 = SubpathPdfs(eye.offset, scaled(eye.fwd), scaled(eye.rev), eye.delta)
-        np.testing.assert_allclose(mis_weights(c2, l2, e2, light_is_delta, False), base, rtol=1e-12)
+        np.testing.assert_allclose(mis_weights(c2, l2, e2, light_flags, False), base, rtol=1e-12)
 
 
 def test_bad_batches_are_rejected():
     rng = np.random.default_rng(0)
-    owner, connections, light, eye, light_is_delta = strategy_batch([(*random_path(rng, 3), False)])
+    owner, connections, light, eye, light_flags = strategy_batch([(*random_path(rng, 3), False)])
     connections.s[0] = 40
     with pytest.raises(ValueError, match="does not fit its subpaths"):
-        mis_weights(connections, light, eye, light_is_delta, False)
+        mis_weights(connections, light, eye, light_flags, False)
     with pytest.raises(KeyError):
-        mis_weights(connections, light, eye, light_is_delta, False, "maximum")
+        mis_weights(connections, light, eye, light_flags, False, "maximum")

@@ -172,8 +172,9 @@ class PinholeCamera:
         """Connect receivers (3, N) to the camera: for light tracing's t = 1 strategy.
 
         Returns (wi (3, N) unit from receiver to the lens point, We (N,), pdf (N,)
-        of that lens point in solid angle at the receiver (for a pinhole: 1, a
-        delta), lens points (3, N), raster positions (2, N), valid (N,)).
+        of that lens point in solid angle at the receiver, d^2 / (|cos| lens_area)
+        (for a pinhole, whose "lens area" is 1, this is a delta's conversion
+        factor, as in pbrt), lens points (3, N), raster positions (2, N), valid (N,)).
         """
         lens = self.sample_lens(u)
         to_lens = lens - receivers.astype(np.float64)
@@ -183,11 +184,8 @@ class PinholeCamera:
         raster, on_film = self.raster(receivers, lens)
         cos = self.cos_to_axis(-wi)
         we = self.importance(-wi, lens)
-        if self.delta_position:
-            pdf = np.ones(dist.shape)
-        else:
-            with np.errstate(divide="ignore", invalid="ignore"):
-                pdf = dist2 / (np.abs(cos) * self.lens_area)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pdf = dist2 / (np.abs(cos) * self.lens_area)
         return wi, we, pdf, lens, raster, on_film & (we > 0)
 
 

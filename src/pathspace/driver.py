@@ -55,6 +55,8 @@ class RenderResult:
     stats : estimator, parameters, colour mode and why, spp, seconds, samples per second, rays, ...
     film : the film with the raw sums (RGB, or XYZ for spectral renders) for merging or further passes
     xyz : (height, width, 3) CIE XYZ of a spectral render (None for RGB renders)
+    strategies : for bidirectional renders with ``pyramid`` > 0, {(s, t): {"unweighted": image,
+        "weighted": image}} in linear sRGB: each strategy's mean contribution per pixel (None otherwise)
     """
 
     image: np.ndarray
@@ -62,6 +64,7 @@ class RenderResult:
     stats: dict[str, Any]
     film: Film = field(repr=False)
     xyz: np.ndarray | None = field(default=None, repr=False)
+    strategies: dict | None = field(default=None, repr=False)
 
     def summary(self) -> str:
         """One line: estimator, spp, time and throughput."""
@@ -155,7 +158,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
             yield first_pass + p
             p += 1
 
-    tile, per_item = work_layout(camera.pixel_count, spp, threads)
+    tile, per_item = work_layout(camera.pixel_count, spp, threads, integrator.tile_pixels)
     last_tile = -(-camera.pixel_count // tile) - 1
     items = _work_items(camera.pixel_count, passes(), tile, per_item)
     lock = threading.Lock()
@@ -167,16 +170,16 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
     # Each worker runs the estimator on its own wavefront, taking items as it needs them; results are added
     # to the film in item order, pass by pass, so the sums come out the same whatever the thread count.
     done = threading.Condition()
-    results: dict[int, tuple[WorkItem, np.ndarray]] = {}
+    results: dict[int, tuple] = {}
     failures: list[BaseException] = []
     counters = [{"rays": 0, "truncated": 0} for _ in range(threads)]
     running = [threads]
 
     def work(k: int) -> None:
         try:
-            for item, values in integrator.render_stream(scene, next_item, seed, mode, counters[k]):
+            for result in integrator.render_stream(scene, next_item, seed, mode, counters[k]):
                 with done:
-                    results[item.index] = (item, values)
+                    results[result[0].index] = result
                     done.notify()
         except BaseException as error:  # handed to the main thread
             failures.append(error)
@@ -190,6 +193,8 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
     for w in workers:
         w.start()
     done_passes = expected = 0
+    pass_image = None      # a pass with splats, gathered tile by tile until its last tile is in
+    strategy_sums: dict = {}
     while True:
         with done:
             while expected not in results and running[0] and not failures:
@@ -198,11 +203,26 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
                 break
             if expected not in results:
                 break
-            item, values = results.pop(expected)
+            item, values, splats, strategies = results.pop(expected)
         expected += 1
         width = item.pixel_stop - item.pixel_start
         for k in range(len(item.passes)):
-            film.add_tile(item.pixel_start, values[:, k * width:(k + 1) * width])
+            if splats is None:
+                film.add_tile(item.pixel_start, values[:, k * width:(k + 1) * width])
+                continue
+            # A pass with splats is one sample of every pixel only once all its tiles are in.
+            if pass_image is None:
+                pass_image = np.zeros((3, camera.pixel_count))
+            pass_image[:, item.pixel_start:item.pixel_stop] += values[:, k * width:(k + 1) * width]
+            pass_image += splats[k]
+            if item.tile == last_tile:
+                film.add_tile(0, pass_image)
+                pass_image = None
+        for key, sums in (strategies or {}).items():
+            if key in strategy_sums:
+                strategy_sums[key] += sums
+            else:
+                strategy_sums[key] = sums
         if item.tile == last_tile:
             done_passes += len(item.passes)
             if bar is not None:
@@ -240,7 +260,23 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
     }
     matrix = mode.film_to_srgb
     return RenderResult(image=film.mean(matrix), variance=film.variance(matrix), stats=stats, film=film,
-                        xyz=film.mean() if mode.name == "spectral" else None)
+                        xyz=film.mean() if mode.name == "spectral" else None,
+                        strategies=_strategy_images(strategy_sums, done_passes, camera, matrix)
+                        if strategy_sums else None)
+
+
+def _strategy_images(sums: dict, passes: int, camera, matrix) -> dict:
+    """Per-strategy mean images (linear sRGB) from per-strategy sums over ``passes`` passes."""
+    out = {}
+    for key in sorted(sums):
+        images = {}
+        for k, name in enumerate(("unweighted", "weighted")):
+            mean = sums[key][k] / max(passes, 1)
+            if matrix is not None:
+                mean = matrix @ mean
+            images[name] = mean.T.reshape(camera.height, camera.width, 3)
+        out[key] = images
+    return out
 
 
 def _colour_mode(scene: Scene, spectral: bool | None, wavelength_sampling: str):

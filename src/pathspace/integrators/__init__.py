@@ -9,11 +9,13 @@ from __future__ import annotations
 import dataclasses
 
 from .base import TILE_PIXELS, WorkItem, work_layout
+from .bdpt import BDPT
+from .lt import LightTracer
 from .pt import PathTracer
 
 __all__ = ["ESTIMATORS", "make_integrator", "WorkItem", "TILE_PIXELS", "work_layout"]
 
-ESTIMATORS = {"pt": PathTracer}
+ESTIMATORS = {"pt": PathTracer, "lt": LightTracer, "bdpt": BDPT}
 
 
 def make_integrator(name: str, **params):

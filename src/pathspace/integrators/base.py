@@ -16,18 +16,20 @@ __all__ = ["WorkItem", "TILE_PIXELS", "work_layout"]
 TILE_PIXELS = 1 << 16
 
 
-def work_layout(pixel_count: int, passes: int | None, workers: int) -> tuple[int, int]:
-    """(tile size in pixels, passes per work item) for an image of ``pixel_count`` pixels.
+def work_layout(pixel_count: int, passes: int | None, workers: int, tile_pixels: int = TILE_PIXELS
+                ) -> tuple[int, int]:
+    """(tile size in pixels, passes per work item) for an image of ``pixel_count`` pixels, in items of
+    about ``tile_pixels`` lanes.
 
     Small images pack several passes into an item, but no more than keeps
     every worker busy when the number of ``passes`` is known.  The grouping
     changes neither the random streams nor the order of film additions.
     """
-    tiles = -(-pixel_count // TILE_PIXELS)
+    tiles = -(-pixel_count // tile_pixels)
     tile = -(-pixel_count // tiles)
     if tiles > 1:
         return tile, 1
-    per_item = max(1, TILE_PIXELS // pixel_count)
+    per_item = max(1, tile_pixels // pixel_count)
     if passes is not None:
         per_item = min(per_item, max(1, -(-passes // (2 * workers))))
     return tile, per_item

@@ -15,9 +15,12 @@ import numpy as np
 
 from .. import _native
 
-__all__ = ["HEURISTICS", "SubpathPdfs", "Connections", "mis_weights", "mis_weights_reference"]
+__all__ = ["HEURISTICS", "LIGHT_DELTA", "LIGHT_INFINITE", "SubpathPdfs", "Connections", "mis_weights",
+           "mis_weights_reference"]
 
 HEURISTICS = {"balance": 0, "power": 1, "uniform": 2, "single": 3, "none": 4}
+# Flags of the light at a path's x_0 (see ext/mis.c): it cannot be hit; it lies at infinity.
+LIGHT_DELTA, LIGHT_INFINITE = 1, 2
 
 
 @dataclass
@@ -40,8 +43,9 @@ class SubpathPdfs:
 class Connections:
     """One row per connection: strategy, lane, and the densities it changes (see ext/mis.c).
 
-    ``light_is_delta`` (passed beside) is per connection too: whether the light
-    at the path's x_0 cannot be hit by rays.
+    ``light_flags`` (passed beside) are per connection too: LIGHT_DELTA if the
+    light at the path's x_0 cannot be hit by rays, LIGHT_INFINITE if it lies
+    at infinity.
     """
 
     s: np.ndarray
@@ -55,7 +59,7 @@ class Connections:
     pt_minus_rev: np.ndarray
 
 
-def mis_weights(c: Connections, light: SubpathPdfs, eye: SubpathPdfs, light_is_delta: np.ndarray,
+def mis_weights(c: Connections, light: SubpathPdfs, eye: SubpathPdfs, light_flags: np.ndarray,
                 camera_is_delta: bool, heuristic: str = "power", beta: float = 2.0,
                 target: tuple[int, int] = (-1, -1)) -> np.ndarray:
     """Weight of every connection, computed in C."""
@@ -65,14 +69,14 @@ def mis_weights(c: Connections, light: SubpathPdfs, eye: SubpathPdfs, light_is_d
         np.ascontiguousarray(light.rev, np.float64), np.ascontiguousarray(light.delta, np.uint8),
         np.ascontiguousarray(eye.offset, np.int64), np.ascontiguousarray(eye.fwd, np.float64),
         np.ascontiguousarray(eye.rev, np.float64), np.ascontiguousarray(eye.delta, np.uint8),
-        np.ascontiguousarray(light_is_delta, np.uint8),
+        np.ascontiguousarray(light_flags, np.uint8),
         *(np.ascontiguousarray(v, np.float64) for v in (c.qs_fwd, c.qs_rev, c.qs_minus_rev, c.pt_fwd, c.pt_rev,
                                                          c.pt_minus_rev)),
         camera_is_delta=bool(camera_is_delta), heuristic=HEURISTICS[heuristic], beta=float(beta),
         target_s=int(target[0]), target_t=int(target[1]))
 
 
-def mis_weights_reference(c: Connections, light: SubpathPdfs, eye: SubpathPdfs, light_is_delta: np.ndarray,
+def mis_weights_reference(c: Connections, light: SubpathPdfs, eye: SubpathPdfs, light_flags: np.ndarray,
                           camera_is_delta: bool, heuristic: str = "power", beta: float = 2.0,
                           target: tuple[int, int] = (-1, -1)) -> np.ndarray:
     """The same weights, written plainly in Python (for tests): the sum over strategies s' of
@@ -112,8 +116,11 @@ def mis_weights_reference(c: Connections, light: SubpathPdfs, eye: SubpathPdfs, 
         eo, ei = eye.offset[lane], eye.offset[lane + 1]
         lf, lr, ld = light.fwd[lo:hi], light.rev[lo:hi], light.delta[lo:hi]
         ef, er, ed = eye.fwd[eo:ei], eye.rev[eo:ei], eye.delta[eo:ei]
-        if ((s == 0 and light_is_delta[m]) or (t == 0 and camera_is_delta)
-                or (s >= 1 and s - 1 < len(ld) and ld[s - 1]) or (t >= 1 and t - 1 < len(ed) and ed[t - 1])):
+        light_delta = bool(int(light_flags[m]) & LIGHT_DELTA)
+        no_11 = bool(int(light_flags[m]) & LIGHT_INFINITE) and s + t == 2
+        if ((s == 0 and light_delta) or (t == 0 and camera_is_delta) or (s == 1 and t == 1 and no_11)
+                or (s >= 1 and t >= 1 and s - 1 < len(ld) and ld[s - 1])
+                or (t >= 1 and s >= 1 and t - 1 < len(ed) and ed[t - 1])):
             continue
         total, r = 0.0, (1.0, 0)
         for i in range(t - 1, -1, -1):
@@ -122,14 +129,14 @@ def mis_weights_reference(c: Connections, light: SubpathPdfs, eye: SubpathPdfs, 
             r = times(r, remap0(rev), remap0(fwd))
             delta_here = False if i == t - 1 else bool(ed[i])
             valid = (not delta_here and not ed[i - 1]) if i > 0 else (not delta_here and not camera_is_delta)
-            total += term(r) if valid else 0.0
+            total += term(r) if valid and not (i == 1 and no_11) else 0.0
         r = (1.0, 0)
         for i in range(s - 1, -1, -1):
             fwd = c.qs_fwd[m] if i == s - 1 else lf[i]
             rev = c.qs_rev[m] if i == s - 1 else (c.qs_minus_rev[m] if i == s - 2 else lr[i])
             r = times(r, remap0(rev), remap0(fwd))
             delta_here = False if i == s - 1 else bool(ld[i])
-            delta_before = bool(ld[i - 1]) if i > 0 else bool(light_is_delta[m])
-            total += term(r) if (not delta_here and not delta_before) else 0.0
+            delta_before = bool(ld[i - 1]) if i > 0 else light_delta
+            total += term(r) if (not delta_here and not delta_before and not (i == 1 and no_11)) else 0.0
         out[m] = 1.0 / (1.0 + total)
     return out

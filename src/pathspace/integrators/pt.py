@@ -60,8 +60,9 @@ from ..lights import MEASURES, SELECTIONS
 from ..mis import HEURISTICS, mis_weight
 from ..roulette import RussianRoulette
 from ..sampler import StreamSampler
-from ..vecmath import dot, leave_distance, segment_span
+from ..vecmath import dot, leave_distance
 from .base import TILE_PIXELS, WorkItem
+from .visibility import light_sample_blocked
 from .wavefront import ItemBook, Lanes
 
 __all__ = ["PathTracer"]
@@ -95,6 +96,7 @@ class PathTracer:
     roulette: RussianRoulette = field(init=False, repr=False)
 
     name = "pt"
+    tile_pixels = TILE_PIXELS
 
     def __post_init__(self) -> None:
         if not (isinstance(self.max_depth, (int, np.integer)) and (self.max_depth == -1 or self.max_depth >= 1)):
@@ -153,9 +155,10 @@ class PathTracer:
     def render_stream(self, scene, next_item, seed: int, mode, counters: dict) -> Iterator[tuple[WorkItem, np.ndarray]]:
         """Render work items taken from ``next_item()`` (None when there are no more) on one wavefront.
 
-        Yields (item, values (3, n)) as items finish: ``values[:, k]`` is the
-        sample of pixel ``item.pixels[k]``, in RGB or XYZ as the colour
-        ``mode`` says.  New items join whenever fewer than ``REFILL`` paths
+        Yields (item, values (3, n), None, None) as items finish:
+        ``values[:, k]`` is the sample of pixel ``item.pixels[k]``, in RGB or
+        XYZ as the colour ``mode`` says (the Nones: no splats, no
+        per-strategy images; see :mod:`pathspace.integrators.bidirectional`).  New items join whenever fewer than ``REFILL`` paths
         are alive.  Adds ray and truncation counts to ``counters``.
         """
         lights = scene.lights
@@ -185,7 +188,8 @@ class PathTracer:
             if paths is None or not paths.size:
                 break
             counters["rays"] += self._bounce(scene, paths, sampler, book, strategy, env, mode, options, counters)
-            yield from book.finished()
+            for item, values in book.finished():
+                yield item, values, None, None
 
     def _bounce(self, scene, paths, sampler, book, strategy, env, mode, options, counters) -> int:
         """Advance every path by one segment: trace, gather emission, sample lights and the BSDF, roulette."""
@@ -310,32 +314,9 @@ class PathTracer:
         useful = ls.facing & (scale > 0) & (np.maximum(np.maximum(f_cos[0], f_cos[1]), f_cos[2]) > 0)
         lanes = np.flatnonzero(useful)
         if lanes.size:
-            useful[lanes[self._shadowed(scene, p, eps, surface, ls, lanes)]] = False
+            useful[lanes[light_sample_blocked(scene, p, eps, surface.n, ls, lanes)]] = False
         scale = np.where(useful, scale, 0.0)
         return np.where(useful, beta * f_cos * (ls.value * scale), 0.0)
-
-    @staticmethod
-    def _shadowed(scene, p, eps, surface, ls, lanes) -> np.ndarray:
-        """Whether the segments from receivers ``p`` to light samples ``ls`` (at ``lanes``) are blocked.
-
-        Segments leave the receiver's surface and stop short of the light's
-        (point lights have no surface: their offset is 0); rays toward
-        infinite lights have no end.
-        """
-        start = np.take(p, lanes, axis=1)
-        wi = np.take(ls.wi, lanes, axis=1)
-        distance = ls.distance.take(lanes)
-        cos_start = dot(np.take(surface.n, lanes, axis=1), wi)
-        finite = np.isfinite(distance)
-        if finite.all():
-            tmin, tmax = segment_span(eps.take(lanes), cos_start, ls.epsilon.take(lanes), ls.cos_light.take(lanes),
-                                      distance)
-            return scene.accel.occluded(start, np.take(ls.point, lanes, axis=1) - start, tmin, tmax, threads=1)
-        length = np.where(finite, distance, 1.0)
-        tmin, tmax = segment_span(eps.take(lanes), cos_start, ls.epsilon.take(lanes), ls.cos_light.take(lanes),
-                                  length)
-        direction = np.where(finite, np.take(ls.point, lanes, axis=1) - start, wi)
-        return scene.accel.occluded(start, direction, tmin, np.where(finite, tmax, np.inf), threads=1)
 
     # -- mixture sampling --------------------------------------------------------------------------
 

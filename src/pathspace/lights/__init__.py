@@ -42,12 +42,14 @@ class EmissionSample:
     light's delta direction).  ``value``: radiance (area, environment),
     intensity (point, spot) or irradiance (directional) carried by the ray.
     The ray starts at ``point``, ``tmin`` along ``direction`` (see
-    :func:`pathspace.vecmath.leave_distance`); for infinite lights ``point``
-    lies on a disk outside the scene and ``normal`` is the direction.
+    :func:`pathspace.vecmath.leave_distance`; ``epsilon``: the ray offset of
+    an area light's surface, else 0); for infinite lights ``point`` lies on a
+    disk outside the scene and ``normal`` is the direction; point and spot
+    lights have a zero ``normal``.
     """
 
-    __slots__ = ("point", "tmin", "normal", "direction", "value", "pdf_pos", "pdf_dir", "entity", "infinite",
-                 "cos_light")
+    __slots__ = ("point", "tmin", "epsilon", "normal", "direction", "value", "pdf_pos", "pdf_dir", "entity",
+                 "infinite", "cos_light")
 
     def __init__(self, **fields):
         for name in self.__slots__:
@@ -64,9 +66,10 @@ def _sample_cosine(n: np.ndarray, u: np.ndarray) -> np.ndarray:
 class LightSample:
     """One light sample per receiver (N lanes)."""
 
-    __slots__ = ("wi", "distance", "point", "normal", "value", "facing", "pdf", "delta", "cos_light", "epsilon")
+    __slots__ = ("wi", "distance", "point", "normal", "value", "facing", "pdf", "delta", "cos_light", "epsilon",
+                 "entity")
 
-    def __init__(self, wi, distance, point, normal, value, facing, pdf, delta, cos_light, epsilon):
+    def __init__(self, wi, distance, point, normal, value, facing, pdf, delta, cos_light, epsilon, entity):
         self.wi = wi                # (3, N) float32 unit, receiver -> light
         self.distance = distance    # (N,) float32; inf for directional and environment samples
         self.point = point          # (3, N) float32 point on the light (finite lights)
@@ -77,6 +80,7 @@ class LightSample:
         self.delta = delta          # (N,) bool
         self.cos_light = cos_light  # (N,) float32 dot(normal, -wi) for area lights; 1 otherwise
         self.epsilon = epsilon      # (N,) float32 ray offset of the light's surface (area lights; else 0)
+        self.entity = entity        # (N,) int64 the sampled entity (see LightSet)
 
 
 class LightSet:
@@ -169,7 +173,7 @@ class LightSet:
         pmf = self.pmf(selection).take(entity)
         kind = self.kind.take(entity)
         if self.count == self.area.count:  # only area lights: no dispatch
-            return self._sample_area(self.index.take(entity), receivers, u[1:3], pmf, colours, measure)
+            return self._sample_area(self.index.take(entity), receivers, u[1:3], pmf, colours, measure, entity)
         wi = np.zeros((3, count), dtype=np.float32)
         distance = np.full(count, np.inf, dtype=np.float32)
         point = np.zeros((3, count), dtype=np.float32)
@@ -185,7 +189,7 @@ class LightSet:
             idx, ref, uu = self.index.take(entity.take(lanes)), np.take(receivers, lanes, axis=1), u[1:3, lanes]
             mine = colours.take(lanes)
             if k == AREA:
-                s = self._sample_area(idx, ref, uu, pmf.take(lanes), mine, measure)
+                s = self._sample_area(idx, ref, uu, pmf.take(lanes), mine, measure, entity.take(lanes))
                 wi[:, lanes], distance[lanes], point[:, lanes], normal[:, lanes] = s.wi, s.distance, s.point, s.normal
                 value[:, lanes], facing[lanes], pdf[lanes], cos_light[lanes] = s.value, s.facing, s.pdf, s.cos_light
                 epsilon[lanes] = s.epsilon
@@ -219,13 +223,14 @@ class LightSet:
             distance[lanes] = dist
             point[:, lanes] = position
             value[:, lanes] = mine.lookup(intensity, idx) * (falloff / dist2)
-        return LightSample(wi, distance, point, normal, value, facing, pdf, delta, cos_light, epsilon)
+        return LightSample(wi, distance, point, normal, value, facing, pdf, delta, cos_light, epsilon, entity)
 
-    def _sample_area(self, emitter, receivers, u, pmf, colours, measure) -> LightSample:
+    def _sample_area(self, emitter, receivers, u, pmf, colours, measure, entity) -> LightSample:
         point, normal, wi, distance, cos_light, pdf = self.area.sample(emitter, receivers, u, measure)
         facing = self.area.two_sided.take(emitter) | (cos_light > 0)
         return LightSample(wi, distance, point, normal, self.area.radiance_of(emitter, colours), facing,
-                           pdf * pmf, np.zeros(pmf.shape, dtype=bool), cos_light, self.area.table[12].take(emitter))
+                           pdf * pmf, np.zeros(pmf.shape, dtype=bool), cos_light, self.area.table[12].take(emitter),
+                           entity)
 
     def pdf_hit(self, triangles: np.ndarray, receivers: np.ndarray, points: np.ndarray, selection: str = "power",
                 measure: str = "area") -> np.ndarray:
@@ -260,6 +265,7 @@ class LightSet:
         kind, index = self.kind.take(entity), self.index.take(entity)
         point = np.zeros((3, count), dtype=np.float32)
         tmin = np.zeros(count, dtype=np.float32)
+        epsilon = np.zeros(count, dtype=np.float32)
         normal = np.zeros((3, count), dtype=np.float32)
         direction = np.zeros((3, count), dtype=np.float32)
         value = np.zeros((colours.channels, count))
@@ -282,6 +288,7 @@ class LightSet:
                 cos = np.abs(dot(n, d)).astype(np.float64)
                 point[:, lanes], normal[:, lanes], direction[:, lanes] = p, n, d
                 tmin[lanes] = leave_distance(rows[12], dot(n, d))
+                epsilon[lanes] = rows[12]
                 value[:, lanes] = self.area.radiance_of(idx, mine)
                 pdf_pos[lanes] = pmf.take(lanes) / self.area.area.take(idx)
                 pdf_dir[lanes] = cos * warp.INV_PI * np.where(two, 0.5, 1.0)
@@ -317,9 +324,8 @@ class LightSet:
                 normal[:, lanes] = d
                 pdf_pos[lanes] = pmf.take(lanes) / (np.pi * radius * radius)
         infinite = (kind == DIRECTIONAL) | (kind == ENVIRONMENT)
-        return EmissionSample(point=point, tmin=tmin, normal=normal, direction=direction, value=value,
+        return EmissionSample(point=point, tmin=tmin, epsilon=epsilon, normal=normal, direction=direction, value=value,
                               pdf_pos=pdf_pos, pdf_dir=pdf_dir, entity=entity, infinite=infinite, cos_light=cos_light)
-
 
     def _sample_spot(self, idx: np.ndarray, u: np.ndarray):
         """Directions uniform within each spot light's cone, their solid-angle density and the falloff."""
@@ -340,6 +346,39 @@ class LightSet:
             falloff[lanes] = spot.falloff(d[:, lanes].astype(np.float64))
         return d, density, falloff
 
+    def origin_pdf(self, entity: np.ndarray, selection: str = "power") -> np.ndarray:
+        """Density, with the selection pmf, of the point :meth:`sample_emission` starts from on ``entity``
+        (pbrt's PdfLightOrigin): per area for area lights; the pmf alone for point, spot and directional
+        lights (a delta); per solid angle of the direction for the environment."""
+        kind = self.kind.take(entity)
+        per = np.ones(entity.size)
+        on_area = np.flatnonzero(kind == AREA)
+        per[on_area] = 1.0 / self.area.area.take(self.index.take(entity.take(on_area)))
+        per[kind == ENVIRONMENT] = warp.INV_FOUR_PI
+        return self.pmf(selection).take(entity) * per
+
+    def emitted_toward(self, entity: np.ndarray, normal: np.ndarray, direction: np.ndarray, colours) -> np.ndarray:
+        """What finite lights ``entity`` send along unit ``direction`` (3, N), (C, N): radiance times |cos|
+        at a point with geometric normal ``normal`` (area lights; 0 behind one-sided ones), intensity
+        (point lights), intensity times falloff (spot lights).  Infinite lights: 0."""
+        kind, index = self.kind.take(entity), self.index.take(entity)
+        out = np.zeros((colours.channels, entity.size))
+        for k in np.unique(kind):
+            lanes = np.flatnonzero(kind == k)
+            idx, mine = index.take(lanes), colours.take(lanes)
+            d = np.take(direction, lanes, axis=1)
+            if k == AREA:
+                cos = dot(np.take(normal, lanes, axis=1), d).astype(np.float64)
+                out[:, lanes] = self.area.emitted(idx, cos, mine) * np.abs(cos)
+            elif k == POINT:
+                out[:, lanes] = mine.lookup(self.point_intensity, idx)
+            elif k == SPOT:
+                falloff = np.zeros(lanes.size)
+                for j in np.unique(idx):
+                    this_spot = idx == j
+                    falloff[this_spot] = self.spots[j].falloff(d[:, this_spot].astype(np.float64))
+                out[:, lanes] = mine.lookup(self.spot_intensity, idx) * falloff
+        return out
 
     def emission_pdf_dir(self, entity: np.ndarray, normal: np.ndarray, direction: np.ndarray) -> np.ndarray:
         """Solid-angle density with which :meth:`sample_emission` emits ``direction`` from finite lights ``entity``

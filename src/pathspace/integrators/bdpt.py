@@ -1,0 +1,137 @@
+"""Bidirectional path tracing (Veach & Guibas 1995; Veach 1997, ch. 10) with every (s, t) strategy.
+
+Each pixel sample builds a camera subpath and a light subpath and joins
+them in every way the scene allows (see :mod:`pathspace.integrators.connections`):
+s = 0 (the camera subpath hits a light), s = 1 (a light sample), t = 1 (a
+lens sample, splatted), t = 0 (the light subpath passes through a thin lens,
+splatted) and s, t >= 2 (a shadow ray between the two).  The strategies are
+combined with multiple importance sampling; the weights come from ratios of
+vertex densities computed in C (see ``ext/mis.c``).
+
+Parameters
+----------
+max_depth : int, default -1
+    Longest path in segments; -1 is unbounded (the full solution).
+mis : "power" (default), "balance", "uniform", "single" or "none"
+    The MIS heuristic (Veach 1997, sec. 9.2): "uniform" gives each strategy
+    that can produce the path the weight 1 / (their number); "single" keeps
+    only ``strategy`` (with weight 1), for debugging and per-strategy
+    studies; "none" weighs every strategy 1, so the image is the *sum* of
+    the strategies' estimates -- useful for variance figures, not an
+    estimate of the image.
+mis_beta : float, default 2
+    Exponent of the power heuristic.
+strategy : (s, t), for mis="single"
+rr : "albedo" (default), "fixed" or "off"
+    Russian roulette on both subpaths with a local continuation probability
+    per material (albedo bound, or 1 - ``rr_probability``), the same in both
+    directions, so it enters the vertex densities MIS compares.
+rr_probability : float in [0, 1), default 0.5
+    Termination probability of "fixed".
+diffuse_sampling : "cosine" (default) or "uniform"
+pyramid : int, default 0
+    Record, for every path length up to this many segments and every
+    strategy (s, t), the unweighted and the weighted contribution images
+    (Veach's pyramid; ``RenderResult.strategies``).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..bsdfs import DIFFUSE_SAMPLING
+from .bdpt_mis import HEURISTICS, Connections, SubpathPdfs, mis_weights
+from .bidirectional import Bidirectional
+from .connections import Batch, Contributions, emitter_hits, joins, lens_hits, lens_samples, light_samples
+from .subpaths import ROULETTE
+
+__all__ = ["BDPT", "check_common"]
+
+
+def check_common(estimator) -> None:
+    """Validate the parameters bidirectional estimators share (ValueError naming the parameter)."""
+    if not (isinstance(estimator.max_depth, (int, np.integer)) and (estimator.max_depth == -1
+                                                                   or estimator.max_depth >= 1)):
+        raise ValueError(f"max_depth: expected -1 (unbounded) or an integer >= 1, got {estimator.max_depth!r}")
+    if estimator.rr not in ROULETTE:
+        raise ValueError(f"rr: expected one of {ROULETTE}, got {estimator.rr!r}")
+    if not (isinstance(estimator.rr_probability, (int, float)) and 0.0 <= estimator.rr_probability < 1.0):
+        raise ValueError(f"rr_probability: expected a termination probability in [0, 1), got "
+                         f"{estimator.rr_probability!r}")
+    if estimator.diffuse_sampling not in DIFFUSE_SAMPLING:
+        raise ValueError(f"diffuse_sampling: expected one of {DIFFUSE_SAMPLING}, got {estimator.diffuse_sampling!r}")
+    if not (isinstance(estimator.pyramid, (int, np.integer)) and estimator.pyramid >= 0):
+        raise ValueError(f"pyramid: expected an integer >= 0 (path length in segments), got {estimator.pyramid!r}")
+
+
+@dataclass
+class BDPT(Bidirectional):
+    """Bidirectional path tracer; see the module docstring for the parameters."""
+
+    max_depth: int = -1
+    mis: str = "power"
+    mis_beta: float = 2.0
+    strategy: tuple | None = None
+    rr: str = "albedo"
+    rr_probability: float = 0.5
+    diffuse_sampling: str = "cosine"
+    pyramid: int = 0
+
+    name = "bdpt"
+    uses_lens_hits = True
+
+    def __post_init__(self) -> None:
+        check_common(self)
+        if self.mis not in HEURISTICS:
+            raise ValueError(f"mis: expected one of {tuple(HEURISTICS)}, got {self.mis!r}")
+        if not (isinstance(self.mis_beta, (int, float)) and np.isfinite(self.mis_beta) and self.mis_beta > 0):
+            raise ValueError(f"mis_beta: expected a finite number > 0, got {self.mis_beta!r}")
+        if self.mis == "single":
+            st = self.strategy
+            if not (isinstance(st, (tuple, list)) and len(st) == 2
+                    and all(isinstance(x, (int, np.integer)) and x >= 0 for x in st) and st[0] + st[1] >= 2):
+                raise ValueError(f"strategy: mis='single' needs (s, t) with s, t >= 0 and s + t >= 2, got {st!r}")
+            self.strategy = (int(st[0]), int(st[1]))
+        elif self.strategy is not None:
+            raise ValueError("strategy: only used with mis='single'")
+
+    def plan(self, scene) -> list[str]:
+        """What this estimator will do on ``scene``, and what it leaves out and why."""
+        depth = "unbounded" if self.max_depth < 0 else self.max_depth
+        weights = {"power": f"power heuristic (beta={self.mis_beta:g})", "balance": "balance heuristic",
+                   "uniform": "uniform weights over the strategies that can produce each path",
+                   "single": f"only strategy (s, t) = {self.strategy}",
+                   "none": "no MIS: every strategy weighted 1 (the image is the sum of the strategies)"}[self.mis]
+        lines = [f"bidirectional path tracing, max_depth={depth}; {weights}",
+                 f"Russian roulette: {self.rr} (local, in the vertex densities)"]
+        camera, lights = scene.camera, scene.lights
+        lines.append("pinhole camera: no t = 0 strategy (rays cannot hit it)" if camera.delta_position
+                     else "thin-lens camera: t = 0 strategy (light subpaths passing through the lens)")
+        if lights.has_delta:
+            lines.append("point/spot/directional lights: no s = 0 strategy for their paths (rays cannot hit them)")
+        if lights.environment is not None:
+            lines.append("environment: camera subpaths that leave the scene end on it (s = 0)")
+        delta = [n for n, m in zip(scene.materials.names, scene.materials.materials) if m.delta]
+        if delta:
+            lines.append(f"specular materials ({', '.join(delta)}): no connection through their vertices")
+        return lines
+
+    def check(self, scene) -> None:
+        """Nothing in a scene stops BDPT (strategies a scene makes infeasible get weight 0)."""
+
+    def _contributions(self, batch: Batch):
+        for family in (emitter_hits, light_samples, lens_samples, lens_hits):
+            part = family(batch)
+            if part is not None:
+                yield part
+        yield from joins(batch)
+
+    def _weights(self, part: Contributions, batch: Batch) -> np.ndarray:
+        light, eye = batch.light, batch.eye
+        connections = Connections(part.s, part.t, part.lane, part.qs_fwd, part.qs_rev, part.qs_minus_rev,
+                                  part.pt_fwd, part.pt_rev, part.pt_minus_rev)
+        return mis_weights(connections, SubpathPdfs(light.offset, light.fwd, light.rev, light.delta),
+                           SubpathPdfs(eye.offset, eye.fwd, eye.rev, eye.delta), part.flags,
+                           batch.scene.camera.delta_position, self.mis, self.mis_beta,
+                           self.strategy if self.strategy is not None else (-1, -1))

@@ -1,0 +1,67 @@
+"""Light tracing: light subpaths joined to the camera (the t = 1 strategies of BDPT), splatted.
+
+Each pixel sample launches one light subpath; every vertex of it that can
+scatter toward the camera (and the light point itself) is joined to a point
+on the lens and its contribution lands on the pixel it projects to.  Paths
+that reach the camera only through specular surfaces (a mirror seen by a
+pinhole camera, caustics seen through glass) cannot be formed, so those
+parts of the image stay black; everywhere else the estimate converges to
+the same image as path tracing.
+
+Parameters: ``max_depth``, ``rr``, ``rr_probability``, ``diffuse_sampling``
+and ``pyramid`` as for :mod:`pathspace.integrators.bdpt`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .bdpt import check_common
+from .bidirectional import Bidirectional
+from .connections import Batch, Contributions, lens_samples
+
+__all__ = ["LightTracer"]
+
+
+@dataclass
+class LightTracer(Bidirectional):
+    """Light tracer; see the module docstring for the parameters."""
+
+    max_depth: int = -1
+    rr: str = "albedo"
+    rr_probability: float = 0.5
+    diffuse_sampling: str = "cosine"
+    pyramid: int = 0
+
+    name = "lt"
+    uses_camera_subpaths = False
+    uses_lens_hits = False
+
+    def __post_init__(self) -> None:
+        check_common(self)
+
+    def plan(self, scene) -> list[str]:
+        """What this estimator will do on ``scene``, and what it leaves out and why."""
+        depth = "unbounded" if self.max_depth < 0 else self.max_depth
+        lines = [f"light tracing, max_depth={depth}; Russian roulette: {self.rr}"]
+        delta = [n for n, m in zip(scene.materials.names, scene.materials.materials) if m.delta]
+        if delta:
+            lines.append(f"specular materials ({', '.join(delta)}): paths reaching the camera only through them "
+                         "are not formed (those pixels miss that light)")
+        if scene.lights.environment is not None:
+            lines.append("environment seen directly: not formed (an infinite light cannot be joined to the camera)")
+        return lines
+
+    def check(self, scene) -> None:
+        """Raise ValueError if the scene has no light to trace from."""
+        if not scene.lights.count:
+            raise ValueError("light tracing needs at least one light")
+
+    def _contributions(self, batch: Batch):
+        part = lens_samples(batch)
+        if part is not None:
+            yield part
+
+    def _weights(self, part: Contributions, batch: Batch) -> np.ndarray:
+        return np.ones(part.count)
