@@ -183,7 +183,8 @@ class PinholeCamera:
         wi = to_lens / dist
         raster, on_film = self.raster(receivers, lens)
         cos = self.cos_to_axis(-wi)
-        we = self.importance(-wi, lens)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            we = np.where(on_film, 1.0 / (self.image_area * self.lens_area * cos ** 4), 0.0)  # importance()
         with np.errstate(divide="ignore", invalid="ignore"):
             pdf = dist2 / (np.abs(cos) * self.lens_area)
         return wi, we, pdf, lens, raster, on_film & (we > 0)

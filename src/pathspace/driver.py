@@ -52,7 +52,9 @@ class RenderResult:
     ----------
     image : (height, width, 3) float64, the per-pixel mean in linear sRGB
     variance : (height, width, 3) float64, estimated variance of that mean
-    stats : estimator, parameters, colour mode and why, spp, seconds, samples per second, rays, ...
+    stats : estimator, parameters, colour mode and why, spp, seconds, samples per second, rays,
+        nonfinite (dropped samples), truncated (paths cut at the safety depth), longest_subpath
+        (segments of the longest path, or subpath for bidirectional estimators), ...
     film : the film with the raw sums (RGB, or XYZ for spectral renders) for merging or further passes
     xyz : (height, width, 3) CIE XYZ of a spectral render (None for RGB renders)
     strategies : for bidirectional renders with ``pyramid`` > 0, {(s, t): {"unweighted": image,
@@ -172,7 +174,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
     done = threading.Condition()
     results: dict[int, tuple] = {}
     failures: list[BaseException] = []
-    counters = [{"rays": 0, "truncated": 0} for _ in range(threads)]
+    counters = [{"rays": 0, "truncated": 0, "longest": 0} for _ in range(threads)]
     running = [threads]
 
     def work(k: int) -> None:
@@ -256,6 +258,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
         "mode_reason": mode_reason,
         "nonfinite": film.nonfinite,
         "truncated": truncated,
+        "longest_subpath": max(c["longest"] for c in counters),
         "scene": scene.source,
     }
     matrix = mode.film_to_srgb

@@ -34,7 +34,7 @@ class Bidirectional:
     """Base of estimators built from light (and camera) subpaths; subclasses choose the connections."""
 
     # Items of at most this many pixels: subpaths and connections of a batch stay within memory.
-    tile_pixels = TILE_PIXELS // 4
+    tile_pixels = TILE_PIXELS // 2
     uses_camera_subpaths = True
 
     def prepare(self, scene) -> None:
@@ -85,6 +85,8 @@ class Bidirectional:
         lens = self.uses_lens_hits and not camera.delta_position
         light, hits, rays = light_subpaths(scene, u, sampler, colours, options, q_table, max_vertices, lens, counters)
         counters["rays"] += rays
+        longest = max(int(light.length.max()), 0 if eye is None else int(eye.length.max())) - 1
+        counters["longest"] = max(counters["longest"], longest)
         terminated = light.terminated if eye is None else light.terminated | eye.terminated
         if terminated.any():
             mode.terminate_secondary(state, terminated)

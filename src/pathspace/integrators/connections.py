@@ -250,8 +250,10 @@ def lens_samples(batch: Batch) -> Contributions | None:
     axis = np.repeat(camera.forward[:, None], v.size, axis=1)
     # pt = the lens point: the camera's positional density, and the light walk's density of reaching it.
     pt_rev = to_area(pdf_fwd * q, axis, wi, dist2)
-    # qs = y_{s-1} as the camera walk would reach it from the lens point.
-    qs_rev = to_area(camera.pdf_direction(-wi, lens), n, wi, dist2)
+    # qs = y_{s-1} as the camera walk would reach it from the lens point: the direction's density
+    # 1 / (A cos^3) is We lens_area cos (see pathspace.camera).
+    we = we[useful]
+    qs_rev = to_area(we * camera.lens_area * np.abs(camera.cos_to_axis(-wi)), n, wi, dist2)
     s = light.index.take(v) + 1
     wo = np.take(light.wo, v, axis=1)
     qs_minus_rev = np.zeros(v.size)

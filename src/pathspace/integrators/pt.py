@@ -196,6 +196,7 @@ class PathTracer:
         mesh, lights, table = scene.mesh, scene.lights, scene.materials
         colours = mode.colours(paths)
         paths.depth += 1
+        counters["longest"] = max(counters["longest"], int(paths.depth[0]))  # the oldest lane comes first
         hits = scene.accel.intersect(paths.origin, paths.direction, paths.tmin, normals=False, threads=1)
         rays = paths.size
         hit = hits.prim >= 0

@@ -47,6 +47,11 @@ SURFACE, CAMERA, LIGHT = 0, 1, 2
 # Subpaths still growing at this many vertices are cut (and counted): only lossless traps get there.
 SAFETY_VERTICES = 10_000
 ROULETTE = ("albedo", "fixed", "off")
+# Continuation probability at specular (delta) vertices under "albedo": glass loses no energy, and a
+# walk can circle inside it by total internal reflection for thousands of bounces (tessellated
+# spheres trap some rays); this keeps such chains geometrically short (the weight grows by 1/0.9 per
+# bounce, and a chain's variance stays finite while it leaves the glass with probability > 0.1).
+DELTA_CONTINUATION = 0.9
 FIELDS = ("lane", "index", "p", "n", "eps", "wo", "beta", "fwd", "rev", "delta", "kind", "material", "entity", "q",
           "infinite", "u")
 CAMERA_UNIFORMS, LIGHT_UNIFORMS = 3, 2  # per vertex, for its connections
@@ -84,7 +89,8 @@ def continuation(scene, policy: str, probability: float) -> np.ndarray:
 
     "albedo": the largest channel of the material's albedo bound (diffuse
     and mirror: reflectance; Phong: diffuse + specular; glass and conductors:
-    1); "fixed": 1 - ``probability``; "off": 1.
+    1), at most DELTA_CONTINUATION for specular materials; "fixed": 1 -
+    ``probability``; "off": 1.
     """
     if policy not in ROULETTE:
         raise ValueError(f"rr: expected one of {ROULETTE}, got {policy!r}")
@@ -100,6 +106,8 @@ def continuation(scene, policy: str, probability: float) -> np.ndarray:
             kd = ColourTable([material.diffuse], "reflectance").rgb[:, 0]
             ks = ColourTable([material.specular], "reflectance").rgb[:, 0]
             out[m] = min(1.0, float((kd + ks).max()))
+        if material.delta:
+            out[m] = min(out[m], DELTA_CONTINUATION)
     return out
 
 
@@ -190,12 +198,13 @@ class _Vertices:
         for record in self.records:
             count += np.bincount(record["lane"], minlength=lanes)
         offset = np.concatenate([[0], np.cumsum(count)]).astype(np.int64)
+        slots = [offset.take(record["lane"]) + record["index"] for record in self.records]
         fields = {}
         for name in FIELDS:
             first = self.records[0][name]
             flat = np.empty(first.shape[:-1] + (int(offset[-1]),), dtype=first.dtype)
-            for record in self.records:
-                flat[..., offset.take(record["lane"]) + record["index"]] = record[name]
+            for slot, record in zip(slots, self.records):
+                flat[..., slot] = record[name]
             fields[name] = flat
         return Subpaths(offset=offset, terminated=terminated, **fields)
 
