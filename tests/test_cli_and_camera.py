@@ -44,6 +44,30 @@ def test_render_and_compare(tmp_path):
     assert same == {"mse": 0.0, "rmse": 0.0, "relmse": 0.0}
 
 
+def test_bdpt_pyramid_from_the_command_line(tmp_path):
+    """-p pyramid=K writes every strategy's images as EXR layers and two labelled contact sheets."""
+    scene = tmp_path / "scene.toml"
+    text = (ROOT / "scenes" / "cornell-box" / "scene.toml").read_text()
+    scene.write_text(text.replace("resolution = [256, 256]", "resolution = [24, 16]"))
+    out = tmp_path / "bd.exr"
+    done = run_cli("render", scene, "-e", "bdpt", "--spp", 4, "-o", out, "-q", "-p", "pyramid=2", "-p",
+                   "strategy=[1,2]", "-p", "mis=single")
+    assert done.returncode == 0, done.stderr
+    import OpenEXR
+    from PIL import Image
+
+    with OpenEXR.File(str(out)) as exr:
+        layers = {name.split(".")[0] for name in exr.channels() if name.startswith("s")}
+        single = np.array(exr.channels()["s1t2.weighted"].pixels)
+    assert layers == {"s0t2", "s1t1", "s0t3", "s1t2", "s2t1"}  # k = 1, 2 with a pinhole: no t = 0
+    image, _, meta = read_exr(out)
+    np.testing.assert_allclose(single, image, rtol=1e-6)  # only (1, 2) is weighted in
+    assert meta["params"]["strategy"] == [1, 2]
+    for kind in ("weighted", "unweighted"):
+        sheet = Image.open(tmp_path / f"bd.strategies-{kind}.png")
+        assert sheet.size[0] > 4 * 24 and sheet.size[1] > 2 * 16
+
+
 def test_cli_errors_are_one_line(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text('[camera]\nposition = [0, 0]\n')

@@ -14,6 +14,7 @@ import tomllib
 from pathlib import Path
 
 from . import metrics
+from .contact_sheet import strategy_layers, write_contact_sheet
 from .driver import render
 from .imageio import read_exr, write_exr, write_png
 from .integrators import ESTIMATORS, make_integrator
@@ -81,12 +82,17 @@ def _render(args) -> int:
     if out.suffix.lower() != ".exr":
         out = out.with_suffix(".exr")
     metadata = {k: v for k, v in result.stats.items() if k != "plan"}
-    write_exr(out, result.image, result.variance, metadata, xyz=result.xyz if args.xyz else None)
+    layers = strategy_layers(result.strategies) if result.strategies else None
+    write_exr(out, result.image, result.variance, metadata, xyz=result.xyz if args.xyz else None, layers=layers)
     written = [str(out)]
     if not args.no_png:
         png = out.with_suffix(".png")
         write_png(png, result.image, exposure=args.exposure)
         written.append(str(png))
+        for kind in ("weighted", "unweighted") if result.strategies else ():
+            sheet = out.with_name(f"{out.stem}.strategies-{kind}.png")
+            write_contact_sheet(sheet, result.strategies, kind, exposure=args.exposure)
+            written.append(str(sheet))
     print(f"colour: {result.stats['mode']} ({result.stats['mode_reason']})")
     for line in result.stats["plan"]:
         print(f"plan: {line}")

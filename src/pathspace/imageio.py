@@ -3,7 +3,8 @@
 EXR files are float32 (OpenEXR does not store float64): the image as the
 ``RGB`` layer (linear sRGB), its per-pixel variance (of the mean) as the
 ``variance`` layer (channels ``variance.R/G/B``), for spectral renders
-optionally CIE XYZ as the ``xyz`` layer (``xyz.X/Y/Z``), and render metadata
+optionally CIE XYZ as the ``xyz`` layer (``xyz.X/Y/Z``), further named layers
+(per-strategy images of bidirectional renders: ``s1t2.weighted.R``, ...), and render metadata
 as string attributes of the header, prefixed ``pathspace.``.  PNGs are 8-bit sRGB after an exposure
 scale, with the sRGB transfer function from colour-science.
 """
@@ -29,8 +30,10 @@ def _check_image(image: np.ndarray, name: str) -> np.ndarray:
 
 
 def write_exr(path: str | os.PathLike, image: np.ndarray, variance: np.ndarray | None = None,
-              metadata: dict[str, Any] | None = None, xyz: np.ndarray | None = None) -> None:
-    """Write an (H, W, 3) image, optionally its variance, CIE XYZ and metadata to an OpenEXR file (float32, ZIP)."""
+              metadata: dict[str, Any] | None = None, xyz: np.ndarray | None = None,
+              layers: dict[str, np.ndarray] | None = None) -> None:
+    """Write an (H, W, 3) image, optionally its variance, CIE XYZ, further named RGB ``layers``
+    (channels ``NAME.R/G/B``) and metadata to an OpenEXR file (float32, ZIP)."""
     import OpenEXR
 
     image = _check_image(image, "image")
@@ -46,6 +49,12 @@ def write_exr(path: str | os.PathLike, image: np.ndarray, variance: np.ndarray |
         xyz = _check_image(xyz, "xyz")
         for c, name in enumerate("XYZ"):
             channels[f"xyz.{name}"] = np.ascontiguousarray(xyz[:, :, c], dtype=np.float32)
+    for layer, values in (layers or {}).items():
+        values = _check_image(values, f"layer {layer!r}")
+        if values.shape != image.shape or layer in ("RGB", "variance", "xyz"):
+            raise ValueError(f"layer {layer!r}: expected a new name and shape {image.shape}, got {values.shape}")
+        for c, name in enumerate("RGB"):
+            channels[f"{layer}.{name}"] = np.ascontiguousarray(values[:, :, c], dtype=np.float32)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for key, value in (metadata or {}).items():
         header[METADATA_PREFIX + key] = value if isinstance(value, str) else json.dumps(value, default=str)

@@ -40,49 +40,26 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..bsdfs import DIFFUSE_SAMPLING
-from .bdpt_mis import HEURISTICS, Connections, SubpathPdfs, mis_weights
+from .bdpt_mis import HEURISTICS, SubpathPdfs, mis_weights
 from .bidirectional import Bidirectional
 from .connections import Batch, Contributions, emitter_hits, joins, lens_hits, lens_samples, light_samples
-from .subpaths import ROULETTE
 
-__all__ = ["BDPT", "check_common"]
-
-
-def check_common(estimator) -> None:
-    """Validate the parameters bidirectional estimators share (ValueError naming the parameter)."""
-    if not (isinstance(estimator.max_depth, (int, np.integer)) and (estimator.max_depth == -1
-                                                                   or estimator.max_depth >= 1)):
-        raise ValueError(f"max_depth: expected -1 (unbounded) or an integer >= 1, got {estimator.max_depth!r}")
-    if estimator.rr not in ROULETTE:
-        raise ValueError(f"rr: expected one of {ROULETTE}, got {estimator.rr!r}")
-    if not (isinstance(estimator.rr_probability, (int, float)) and 0.0 <= estimator.rr_probability < 1.0):
-        raise ValueError(f"rr_probability: expected a termination probability in [0, 1), got "
-                         f"{estimator.rr_probability!r}")
-    if estimator.diffuse_sampling not in DIFFUSE_SAMPLING:
-        raise ValueError(f"diffuse_sampling: expected one of {DIFFUSE_SAMPLING}, got {estimator.diffuse_sampling!r}")
-    if not (isinstance(estimator.pyramid, (int, np.integer)) and estimator.pyramid >= 0):
-        raise ValueError(f"pyramid: expected an integer >= 0 (path length in segments), got {estimator.pyramid!r}")
+__all__ = ["BDPT"]
 
 
 @dataclass
 class BDPT(Bidirectional):
     """Bidirectional path tracer; see the module docstring for the parameters."""
 
-    max_depth: int = -1
     mis: str = "power"
     mis_beta: float = 2.0
     strategy: tuple | None = None
-    rr: str = "albedo"
-    rr_probability: float = 0.5
-    diffuse_sampling: str = "cosine"
-    pyramid: int = 0
 
     name = "bdpt"
     uses_lens_hits = True
 
     def __post_init__(self) -> None:
-        check_common(self)
+        super().__post_init__()
         if self.mis not in HEURISTICS:
             raise ValueError(f"mis: expected one of {tuple(HEURISTICS)}, got {self.mis!r}")
         if not (isinstance(self.mis_beta, (int, float)) and np.isfinite(self.mis_beta) and self.mis_beta > 0):
@@ -129,9 +106,7 @@ class BDPT(Bidirectional):
 
     def _weights(self, part: Contributions, batch: Batch) -> np.ndarray:
         light, eye = batch.light, batch.eye
-        connections = Connections(part.s, part.t, part.lane, part.qs_fwd, part.qs_rev, part.qs_minus_rev,
-                                  part.pt_fwd, part.pt_rev, part.pt_minus_rev)
-        return mis_weights(connections, SubpathPdfs(light.offset, light.fwd, light.rev, light.delta),
+        return mis_weights(part, SubpathPdfs(light.offset, light.fwd, light.rev, light.delta),
                            SubpathPdfs(eye.offset, eye.fwd, eye.rev, eye.delta), part.flags,
                            batch.scene.camera.delta_position, self.mis, self.mis_beta,
                            self.strategy if self.strategy is not None else (-1, -1))

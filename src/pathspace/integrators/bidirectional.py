@@ -16,12 +16,15 @@ drawn with their vertices.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
+from ..bsdfs import DIFFUSE_SAMPLING
 from ..sampler import StreamSampler
 from .base import TILE_PIXELS, WorkItem
 from .connections import Batch, Contributions
-from .subpaths import SAFETY_VERTICES, camera_subpaths, continuation, light_subpaths
+from .subpaths import ROULETTE, SAFETY_VERTICES, camera_subpaths, continuation, light_subpaths
 from .wavefront import Lanes
 
 __all__ = ["Bidirectional"]
@@ -30,12 +33,35 @@ CAMERA_STREAM, LIGHT_STREAM, LANE_STREAM = 0, 1, 2
 EMISSION_UNIFORMS = 5 + 2  # light choice, point, direction (5); the lens sample of vertex 0 (2)
 
 
+@dataclass
 class Bidirectional:
-    """Base of estimators built from light (and camera) subpaths; subclasses choose the connections."""
+    """Base of estimators built from light (and camera) subpaths; subclasses choose the connections.
+
+    Its fields are the parameters all of them take (see :mod:`pathspace.integrators.bdpt`).
+    """
+
+    max_depth: int = -1
+    rr: str = "albedo"
+    rr_probability: float = 0.5
+    diffuse_sampling: str = "cosine"
+    pyramid: int = 0
 
     # Items of at most this many pixels: subpaths and connections of a batch stay within memory.
     tile_pixels = TILE_PIXELS // 2
     uses_camera_subpaths = True
+
+    def __post_init__(self) -> None:
+        if not (isinstance(self.max_depth, (int, np.integer)) and (self.max_depth == -1 or self.max_depth >= 1)):
+            raise ValueError(f"max_depth: expected -1 (unbounded) or an integer >= 1, got {self.max_depth!r}")
+        if self.rr not in ROULETTE:
+            raise ValueError(f"rr: expected one of {ROULETTE}, got {self.rr!r}")
+        if not (isinstance(self.rr_probability, (int, float)) and 0.0 <= self.rr_probability < 1.0):
+            raise ValueError(f"rr_probability: expected a termination probability in [0, 1), got "
+                             f"{self.rr_probability!r}")
+        if self.diffuse_sampling not in DIFFUSE_SAMPLING:
+            raise ValueError(f"diffuse_sampling: expected one of {DIFFUSE_SAMPLING}, got {self.diffuse_sampling!r}")
+        if not (isinstance(self.pyramid, (int, np.integer)) and self.pyramid >= 0):
+            raise ValueError(f"pyramid: expected an integer >= 0 (path length in segments), got {self.pyramid!r}")
 
     def prepare(self, scene) -> None:
         """Build the acceleration structures this estimator uses on ``scene``."""

@@ -21,13 +21,13 @@ connections of at most ``max_depth`` segments are formed.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, fields
+from dataclasses import dataclass
 
 import numpy as np
 
 from ..bsdfs import MaterialLanes, Surface
 from ..vecmath import dot
-from .bdpt_mis import LIGHT_DELTA
+from .bdpt_mis import LIGHT_DELTA, Connections
 from .subpaths import LIGHT, SURFACE, LensHits, Subpaths, light_flags, reverse_pdf, to_area
 from .visibility import light_sample_blocked, segment_blocked
 
@@ -55,20 +55,12 @@ class Batch:
 
 
 @dataclass
-class Contributions:
-    """Unweighted contributions of connections, one column each, with their MIS inputs."""
+class Contributions(Connections):
+    """Unweighted contributions of connections, one column each, with their MIS inputs (the
+    :class:`Connections` fields: strategy, lane, changed densities)."""
 
-    lane: np.ndarray
-    s: np.ndarray
-    t: np.ndarray
     value: np.ndarray         # (C, n)
     raster: np.ndarray        # (2, n) film position of splats (t <= 1); NaN for the lane's own pixel
-    qs_fwd: np.ndarray
-    qs_rev: np.ndarray
-    qs_minus_rev: np.ndarray
-    pt_fwd: np.ndarray
-    pt_rev: np.ndarray
-    pt_minus_rev: np.ndarray
     flags: np.ndarray         # (n,) uint8 light flags
 
     @classmethod
@@ -80,15 +72,6 @@ class Contributions:
                    **{name: densities.get(name, zero) for name in ("qs_fwd", "qs_rev", "qs_minus_rev", "pt_fwd",
                                                                    "pt_rev", "pt_minus_rev")},
                    flags=densities["flags"])
-
-    def take(self, keep: np.ndarray) -> "Contributions":
-        """The connections ``keep`` (indices or a mask)."""
-        return Contributions(**{f.name: np.take(getattr(self, f.name), np.flatnonzero(keep) if keep.dtype == bool
-                                                else keep, axis=-1) for f in fields(self)})
-
-    @classmethod
-    def concatenate(cls, parts: list["Contributions"]) -> "Contributions":
-        return cls(**{f.name: np.concatenate([getattr(p, f.name) for p in parts], axis=-1) for f in fields(cls)})
 
     @property
     def count(self) -> int:
@@ -107,12 +90,10 @@ def _materials(batch: Batch, sub: Subpaths, v: np.ndarray, lanes: np.ndarray):
     return materials, Surface.facing(n, -wo), n, wo
 
 
-def _density_at_previous(pdf_sa: np.ndarray, sub: Subpaths, v: np.ndarray, wo: np.ndarray) -> np.ndarray:
-    """A solid-angle density at vertex ``v`` of the direction ``wo`` toward its previous vertex, turned
-    into an area density there (kept in solid angle where that vertex is at infinity)."""
-    prev = v - 1
-    d = np.take(sub.p, prev, axis=1).astype(np.float64) - np.take(sub.p, v, axis=1)
-    return np.where(sub.infinite.take(prev), pdf_sa, to_area(pdf_sa, np.take(sub.n, prev, axis=1), wo, dot(d, d)))
+def _density_at_previous(pdf_sa: np.ndarray, sub: Subpaths, v: np.ndarray) -> np.ndarray:
+    """A solid-angle density at vertex ``v`` of the direction toward its previous vertex, as an area
+    density there (kept in solid angle where that vertex is at infinity; see ``Subpaths.g_prev``)."""
+    return pdf_sa * sub.g_prev.take(v)
 
 
 # -- s = 0 -----------------------------------------------------------------------------------------
@@ -140,14 +121,10 @@ def emitter_hits(batch: Batch) -> Contributions | None:
         le[:, at_infinity] = lights.environment_radiance(at_infinity.size, colours.take(at_infinity))
     value = np.take(eye.beta, v, axis=1) * le
     keep = _nonzero(value)
-    v, lane, entity, infinite, n, wo, value = (v[keep], lane[keep], entity[keep], infinite[keep], n[:, keep],
-                                               wo[:, keep], value[:, keep])
+    v, lane, entity, n, wo, value = v[keep], lane[keep], entity[keep], n[:, keep], wo[:, keep], value[:, keep]
     # The light walk would start here (pt_rev) and go on to z_{t-2} (pt_minus_rev): emission's directional
     # density, or from infinity the disk density times |cos| there.
-    pdf_dir = lights.emission_pdf_dir(entity, n, wo)
-    prev = v - 1
-    cos_prev = np.abs(dot(np.take(eye.n, prev, axis=1), wo)).astype(np.float64)
-    pt_minus_rev = np.where(infinite, pdf_dir * cos_prev, _density_at_previous(pdf_dir, eye, v, wo))
+    pt_minus_rev = _density_at_previous(lights.emission_pdf_dir(entity, n, wo), eye, v)
     return Contributions.make(lane, 0, eye.index.take(v) + 1, value, pt_fwd=eye.fwd.take(v),
                               pt_rev=lights.origin_pdf(entity), pt_minus_rev=pt_minus_rev,
                               flags=light_flags(scene, entity))
@@ -190,7 +167,7 @@ def light_samples(batch: Batch) -> Contributions | None:
     cos_here = np.abs(dot(n, wi)).astype(np.float64)
     pt_rev = np.where(infinite, pdf_emit * cos_here, to_area(pdf_emit, n, wi, dist2))
     sub_materials = MaterialLanes(scene.materials, eye.material.take(v), batch.colours.take(lane), batch.options)
-    pt_minus_rev = _density_at_previous(reverse_pdf(sub_materials, n, wi, wo) * q, eye, v, wo)
+    pt_minus_rev = _density_at_previous(reverse_pdf(sub_materials, n, wi, wo) * q, eye, v)
     return Contributions.make(lane, 1, eye.index.take(v) + 1, value, qs_fwd=lights.origin_pdf(entity),
                               qs_rev=qs_rev, pt_fwd=eye.fwd.take(v), pt_rev=pt_rev, pt_minus_rev=pt_minus_rev,
                               flags=light_flags(scene, entity))
@@ -254,16 +231,12 @@ def lens_samples(batch: Batch) -> Contributions | None:
     # 1 / (A cos^3) is We lens_area cos (see pathspace.camera).
     we = we[useful]
     qs_rev = to_area(we * camera.lens_area * np.abs(camera.cos_to_axis(-wi)), n, wi, dist2)
-    s = light.index.take(v) + 1
-    wo = np.take(light.wo, v, axis=1)
-    qs_minus_rev = np.zeros(v.size)
-    inner = np.flatnonzero(s >= 2)
-    if inner.size:
-        qs_minus_rev[inner] = _density_at_previous(pdf_back.take(inner) * q.take(inner), light, v.take(inner),
-                                                   np.take(wo, inner, axis=1))
-    return Contributions.make(lane, s, 1, value, raster=raster[:, useful], qs_fwd=light.fwd.take(v), qs_rev=qs_rev,
-                              qs_minus_rev=qs_minus_rev, pt_fwd=np.full(v.size, 1.0 / camera.lens_area),
-                              pt_rev=pt_rev, flags=batch.lane_flags.take(lane))
+    # y_{s-2} as the camera walk would go on to it (nothing for s = 1: pdf_back and g_prev are 0 there).
+    qs_minus_rev = _density_at_previous(pdf_back * q, light, v)
+    return Contributions.make(lane, light.index.take(v) + 1, 1, value, raster=raster[:, useful],
+                              qs_fwd=light.fwd.take(v), qs_rev=qs_rev, qs_minus_rev=qs_minus_rev,
+                              pt_fwd=np.full(v.size, 1.0 / camera.lens_area), pt_rev=pt_rev,
+                              flags=batch.lane_flags.take(lane))
 
 
 # -- t = 0 -----------------------------------------------------------------------------------------
@@ -368,7 +341,7 @@ def _join(batch: Batch, lane, y, z, s, t) -> Contributions | None:
     return Contributions.make(
         lane, s, t, value,
         qs_fwd=light.fwd.take(y), qs_rev=to_area(pdf_z * q_z, ny, w, dist2),
-        qs_minus_rev=_density_at_previous(reverse_pdf(mat_y, ny, w, wo_y) * q_y, light, y, wo_y),
+        qs_minus_rev=_density_at_previous(reverse_pdf(mat_y, ny, w, wo_y) * q_y, light, y),
         pt_fwd=eye.fwd.take(z), pt_rev=to_area(pdf_y * q_y, nz, w, dist2),
-        pt_minus_rev=_density_at_previous(reverse_pdf(mat_z, nz, -w, wo_z) * q_z, eye, z, wo_z),
+        pt_minus_rev=_density_at_previous(reverse_pdf(mat_z, nz, -w, wo_z) * q_z, eye, z),
         flags=batch.lane_flags.take(lane))

@@ -17,7 +17,6 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bdpt import check_common
 from .bidirectional import Bidirectional
 from .connections import Batch, Contributions, lens_samples
 
@@ -28,18 +27,9 @@ __all__ = ["LightTracer"]
 class LightTracer(Bidirectional):
     """Light tracer; see the module docstring for the parameters."""
 
-    max_depth: int = -1
-    rr: str = "albedo"
-    rr_probability: float = 0.5
-    diffuse_sampling: str = "cosine"
-    pyramid: int = 0
-
     name = "lt"
     uses_camera_subpaths = False
     uses_lens_hits = False
-
-    def __post_init__(self) -> None:
-        check_common(self)
 
     def plan(self, scene) -> list[str]:
         """What this estimator will do on ``scene``, and what it leaves out and why."""

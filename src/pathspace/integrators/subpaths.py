@@ -39,6 +39,7 @@ from ..bsdfs import Diffuse, MaterialLanes, Mirror, Phong, Surface
 from ..lights import DIRECTIONAL, ENVIRONMENT, POINT, SPOT
 from ..spectra import ColourTable
 from ..vecmath import dot, leave_distance
+from .bdpt_mis import LIGHT_DELTA, LIGHT_INFINITE
 
 __all__ = ["Subpaths", "LensHits", "SURFACE", "CAMERA", "LIGHT", "SAFETY_VERTICES", "ROULETTE", "continuation",
            "camera_subpaths", "light_subpaths", "to_area", "reverse_pdf", "light_flags"]
@@ -52,8 +53,8 @@ ROULETTE = ("albedo", "fixed", "off")
 # spheres trap some rays); this keeps such chains geometrically short (the weight grows by 1/0.9 per
 # bounce, and a chain's variance stays finite while it leaves the glass with probability > 0.1).
 DELTA_CONTINUATION = 0.9
-FIELDS = ("lane", "index", "p", "n", "eps", "wo", "beta", "fwd", "rev", "delta", "kind", "material", "entity", "q",
-          "infinite", "u")
+FIELDS = ("lane", "index", "p", "n", "eps", "wo", "beta", "fwd", "rev", "g_prev", "delta", "kind", "material",
+          "entity", "q", "infinite", "u")
 CAMERA_UNIFORMS, LIGHT_UNIFORMS = 3, 2  # per vertex, for its connections
 BOUNCE_UNIFORMS = 4                     # BSDF lobe and direction (3), roulette (1)
 
@@ -62,10 +63,8 @@ def to_area(pdf_sa: np.ndarray, normal: np.ndarray, w: np.ndarray, dist2: np.nda
     """Solid-angle densities turned into area densities at targets a distance sqrt(dist2) away along unit
     ``w``: pdf |cos| / d^2 with cos between ``w`` and the target's ``normal`` (a zero normal -- a point
     light -- has no cosine factor)."""
-    cos = np.abs(dot(normal, w)).astype(np.float64)
-    cos = np.where((normal != 0).any(axis=0), cos, 1.0)
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(dist2 > 0, pdf_sa * cos / dist2, 0.0)
+        return np.where(dist2 > 0, pdf_sa * _cos_at(normal, w) / dist2, 0.0)
 
 
 def reverse_pdf(materials: MaterialLanes, n: np.ndarray, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
@@ -76,8 +75,6 @@ def reverse_pdf(materials: MaterialLanes, n: np.ndarray, wi: np.ndarray, wo: np.
 
 def light_flags(scene, entity: np.ndarray) -> np.ndarray:
     """MIS flags of light entities (see :mod:`pathspace.integrators.bdpt_mis`)."""
-    from .bdpt_mis import LIGHT_DELTA, LIGHT_INFINITE
-
     kind = scene.lights.kind.take(entity)
     delta = (kind == POINT) | (kind == SPOT) | (kind == DIRECTIONAL)
     infinite = (kind == DIRECTIONAL) | (kind == ENVIRONMENT)
@@ -123,8 +120,11 @@ class Subpaths:
     CAMERA, LIGHT), ``material`` (-1 off surfaces), ``entity`` (the light
     entity of light vertices and of surface vertices on emitters, else -1),
     ``q`` (continuation probability), ``infinite``, ``u`` (its connections'
-    uniforms).  ``terminated`` (lanes,): a dispersive interface kept only the
-    hero wavelength somewhere on the lane's subpath.
+    uniforms), ``g_prev`` (what turns a solid-angle density of leaving the
+    vertex toward its predecessor into an area density there: |cos| / d^2 at
+    the predecessor, |cos| alone from a vertex at infinity, 1 toward one).
+    ``terminated`` (lanes,): a dispersive interface kept only the hero
+    wavelength somewhere on the lane's subpath.
     """
 
     offset: np.ndarray
@@ -137,6 +137,7 @@ class Subpaths:
     beta: np.ndarray
     fwd: np.ndarray
     rev: np.ndarray
+    g_prev: np.ndarray
     delta: np.ndarray
     kind: np.ndarray
     material: np.ndarray
@@ -194,18 +195,12 @@ class _Vertices:
         return arrays
 
     def flatten(self, lanes: int, terminated: np.ndarray) -> Subpaths:
-        count = np.zeros(lanes, dtype=np.int64)
-        for record in self.records:
-            count += np.bincount(record["lane"], minlength=lanes)
-        offset = np.concatenate([[0], np.cumsum(count)]).astype(np.int64)
-        slots = [offset.take(record["lane"]) + record["index"] for record in self.records]
-        fields = {}
-        for name in FIELDS:
-            first = self.records[0][name]
-            flat = np.empty(first.shape[:-1] + (int(offset[-1]),), dtype=first.dtype)
-            for slot, record in zip(slots, self.records):
-                flat[..., slot] = record[name]
-            fields[name] = flat
+        # Records hold vertices depth by depth; a stable sort by lane puts them lane by lane, in depth order.
+        lane = np.concatenate([record["lane"] for record in self.records])
+        order = np.argsort(lane, kind="stable")
+        offset = np.concatenate([[0], np.cumsum(np.bincount(lane, minlength=lanes))]).astype(np.int64)
+        fields = {name: np.concatenate([record[name] for record in self.records], axis=-1).take(order, axis=-1)
+                  for name in FIELDS}
         return Subpaths(offset=offset, terminated=terminated, **fields)
 
 
@@ -230,12 +225,18 @@ class _Walk:
             setattr(self, name, np.take(getattr(self, name), indices, axis=-1))
 
 
-def _record(vertices: _Vertices, lanes, index, p, n, eps, wo, beta, fwd, kind, material, entity, q, infinite, u,
-            delta) -> dict:
+def _record(vertices: _Vertices, lanes, index, p, n, eps, wo, beta, fwd, g_prev, kind, material, entity, q, infinite,
+            u, delta) -> dict:
     count = lanes.size
     return vertices.add(lane=lanes, index=np.full(count, index, dtype=np.int64), p=p, n=n, eps=eps, wo=wo, beta=beta,
-                        fwd=fwd, rev=np.zeros(count), delta=delta, kind=np.full(count, kind, dtype=np.int8),
-                        material=material, entity=entity, q=q, infinite=infinite, u=u)
+                        fwd=fwd, rev=np.zeros(count), g_prev=g_prev, delta=delta,
+                        kind=np.full(count, kind, dtype=np.int8), material=material, entity=entity, q=q,
+                        infinite=infinite, u=u)
+
+
+def _cos_at(normal: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """|cos| between unit ``w`` and normals (3, N); 1 where the normal is zero (point lights)."""
+    return np.where((normal != 0).any(axis=0), np.abs(dot(normal, w)).astype(np.float64), 1.0)
 
 
 def _walk(scene, vertices: _Vertices, walk: _Walk, sampler, colours, mode: str, options: dict, q_table,
@@ -266,7 +267,8 @@ def _walk(scene, vertices: _Vertices, walk: _Walk, sampler, colours, mode: str, 
             count = k.size
             d = np.take(walk.direction, k, axis=1)
             _record(vertices, walk.lanes.take(k), index, np.take(walk.origin, k, axis=1), d,
-                    np.zeros(count, np.float32), -d, np.take(walk.beta, k, axis=1), walk.pdf.take(k), LIGHT,
+                    np.zeros(count, np.float32), -d, np.take(walk.beta, k, axis=1), walk.pdf.take(k),
+                    _cos_at(np.take(walk.prev_n, k, axis=1), d), LIGHT,
                     np.full(count, -1, np.int64), np.full(count, env_entity, np.int64), np.ones(count),
                     np.ones(count, bool), np.zeros((extra, count)), np.zeros(count, bool))
         prim, b1, b2, t = hits.prim, hits.u, hits.v, hits.t
@@ -283,10 +285,11 @@ def _walk(scene, vertices: _Vertices, walk: _Walk, sampler, colours, mode: str, 
         dist2 = t.astype(np.float64) ** 2
         with np.errstate(divide="ignore", invalid="ignore"):
             fwd = walk.pdf * np.abs(cos_in).astype(np.float64) / np.where(walk.prev_infinite, 1.0, dist2)
+            g_prev = np.where(walk.prev_infinite, 1.0, _cos_at(walk.prev_n, walk.direction) / dist2)
         material = mesh.material.take(prim).astype(np.int64)
         q = q_table.take(material)
         u = sampler.draw(BOUNCE_UNIFORMS + extra)
-        record = _record(vertices, walk.lanes, index, p, normal, eps, -walk.direction, walk.beta, fwd, SURFACE,
+        record = _record(vertices, walk.lanes, index, p, normal, eps, -walk.direction, walk.beta, fwd, g_prev, SURFACE,
                          material, emitter_of.take(prim), q, np.zeros(count, bool), u[BOUNCE_UNIFORMS:],
                          table.delta.take(material))
         if index + 1 >= max_vertices:
@@ -298,7 +301,7 @@ def _walk(scene, vertices: _Vertices, walk: _Walk, sampler, colours, mode: str, 
         sample = materials.sample(surface, u[0:3], mode)
         # The previous vertex as the opposite walk would generate it from here (Veach 1997, eq. 10.7).
         pdf_back = np.where(sample.delta, 0.0, reverse_pdf(materials, normal, sample.wi, -walk.direction)) * q
-        rev = np.where(walk.prev_infinite, pdf_back, to_area(pdf_back, walk.prev_n, walk.direction, dist2))
+        rev = pdf_back * g_prev
         if walk.prev_record is not None:
             prev = walk.prev_record
             prev["rev"][np.searchsorted(prev["lane"], walk.lanes)] = rev
@@ -335,7 +338,8 @@ def camera_subpaths(scene, pixels: np.ndarray, u: np.ndarray, sampler, colours, 
     axis = np.repeat(camera.forward.astype(np.float32)[:, None], count, axis=1)
     vertices = _Vertices()
     record = _record(vertices, lanes, 0, origin, axis, np.zeros(count, np.float32), np.zeros((3, count), np.float32),
-                     np.ones((colours.channels, count)), np.full(count, 1.0 / camera.lens_area), CAMERA,
+                     np.ones((colours.channels, count)), np.full(count, 1.0 / camera.lens_area), np.zeros(count),
+                     CAMERA,
                      np.full(count, -1, np.int64), np.full(count, -1, np.int64), np.ones(count),
                      np.zeros(count, bool), np.zeros((CAMERA_UNIFORMS, count)), np.zeros(count, bool))
     walk = _Walk(lanes, origin, np.zeros(count, np.float32), direction, np.ones((colours.channels, count)),
@@ -367,8 +371,9 @@ def light_subpaths(scene, u: np.ndarray, sampler, colours, options: dict, q_tabl
     vertices = _Vertices()
     record = _record(vertices, lanes, 0, e.point.astype(np.float32), e.normal, e.epsilon,
                      np.zeros((3, count), np.float32), np.repeat(beta0[None, :], colours.channels, axis=0),
-                     lights.origin_pdf(e.entity), LIGHT, np.full(count, -1, np.int64), e.entity.astype(np.int64),
-                     np.ones(count), e.infinite, u[5:5 + LIGHT_UNIFORMS], np.zeros(count, bool))
+                     lights.origin_pdf(e.entity), np.zeros(count), LIGHT, np.full(count, -1, np.int64),
+                     e.entity.astype(np.int64), np.ones(count), e.infinite, u[5:5 + LIGHT_UNIFORMS],
+                     np.zeros(count, bool))
     # From an infinite light the next vertex's density is the disk density, projected at the hit.
     pmf = lights.pmf("power").take(e.entity)
     with np.errstate(divide="ignore", invalid="ignore"):
