@@ -94,10 +94,6 @@ static inline double term(const Ratio *r, const MisBatch *b)
 static double weight_of(const MisBatch *b, npy_intp m)
 {
     int s = b->s[m], t = b->t[m];
-    if (b->heuristic == H_NONE)
-        return 1.0;
-    if (b->heuristic == H_SINGLE)
-        return (s == b->target_s && t == b->target_t) ? 1.0 : 0.0;
     int64_t lane = b->lane[m];
     const double *lf = b->light_fwd + b->light_offset[lane], *lr = b->light_rev + b->light_offset[lane];
     const uint8_t *ld = b->light_delta + b->light_offset[lane];
@@ -113,6 +109,10 @@ static double weight_of(const MisBatch *b, npy_intp m)
     if ((s == 0 && light_delta) || (t == 0 && b->camera_is_delta) || (s == 1 && t == 1 && no_11) ||
         (s >= 1 && t >= 1 && s - 1 < light_len && ld[s - 1]) || (t >= 1 && s >= 1 && t - 1 < eye_len && ed[t - 1]))
         return 0.0;
+    if (b->heuristic == H_NONE)
+        return 1.0;
+    if (b->heuristic == H_SINGLE)
+        return (s == b->target_s && t == b->target_t) ? 1.0 : 0.0;
     double sum = 0.0;
     Ratio r = {1.0, 0};
 

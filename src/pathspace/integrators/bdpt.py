@@ -15,8 +15,8 @@ max_depth : int, default -1
 mis : "power" (default), "balance", "uniform", "single" or "none"
     The MIS heuristic (Veach 1997, sec. 9.2): "uniform" gives each strategy
     that can produce the path the weight 1 / (their number); "single" keeps
-    only ``strategy`` (with weight 1), for debugging and per-strategy
-    studies; "none" weighs every strategy 1, so the image is the *sum* of
+    only ``strategy`` (with weight 1 where it can produce the path), for
+    debugging and per-strategy studies; "none" weighs every strategy 1, so the image is the *sum* of
     the strategies' estimates -- useful for variance figures, not an
     estimate of the image.
 mis_beta : float, default 2
@@ -70,6 +70,9 @@ class BDPT(Bidirectional):
                     and all(isinstance(x, (int, np.integer)) and x >= 0 for x in st) and st[0] + st[1] >= 2):
                 raise ValueError(f"strategy: mis='single' needs (s, t) with s, t >= 0 and s + t >= 2, got {st!r}")
             self.strategy = (int(st[0]), int(st[1]))
+            if 0 < self.max_depth < sum(self.strategy) - 1:
+                raise ValueError(f"strategy: {self.strategy} forms paths of {sum(self.strategy) - 1} segments, "
+                                 f"longer than max_depth={self.max_depth}")
         elif self.strategy is not None:
             raise ValueError("strategy: only used with mis='single'")
 

@@ -106,12 +106,6 @@ def mis_weights_reference(c: Connections, light: SubpathPdfs, eye: SubpathPdfs, 
     out = np.zeros(len(c.s))
     for m in range(len(c.s)):
         s, t, lane = int(c.s[m]), int(c.t[m]), int(c.lane[m])
-        if heuristic == "none":
-            out[m] = 1.0
-            continue
-        if heuristic == "single":
-            out[m] = float((s, t) == tuple(target))
-            continue
         lo, hi = light.offset[lane], light.offset[lane + 1]
         eo, ei = eye.offset[lane], eye.offset[lane + 1]
         lf, lr, ld = light.fwd[lo:hi], light.rev[lo:hi], light.delta[lo:hi]
@@ -121,6 +115,9 @@ def mis_weights_reference(c: Connections, light: SubpathPdfs, eye: SubpathPdfs, 
         if ((s == 0 and light_delta) or (t == 0 and camera_is_delta) or (s == 1 and t == 1 and no_11)
                 or (s >= 1 and t >= 1 and s - 1 < len(ld) and ld[s - 1])
                 or (t >= 1 and s >= 1 and t - 1 < len(ed) and ed[t - 1])):
+            continue
+        if heuristic in ("none", "single"):
+            out[m] = 1.0 if heuristic == "none" else float((s, t) == tuple(target))
             continue
         total, r = 0.0, (1.0, 0)
         for i in range(t - 1, -1, -1):

@@ -138,6 +138,7 @@ class Bidirectional:
             if strategies is not None:
                 self._record_strategies(strategies, part, weighted, film_pixel, mode, state, pixels)
         counters["rays"] += batch.rays
+        counters["nonfinite"] += batch.nonfinite
         return item, mode.to_film(own, state, np.arange(count)), splats, strategies
 
     def _record_strategies(self, strategies: dict, part: Contributions, weighted: np.ndarray, film_pixel, mode,

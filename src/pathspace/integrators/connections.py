@@ -47,8 +47,9 @@ class Batch:
     lens: LensHits | None
     colours: object
     options: dict
-    max_depth: int  # segments
-    rays: int = 0   # shadow rays traced
+    max_depth: int     # segments
+    rays: int = 0      # shadow rays traced
+    nonfinite: int = 0  # contributions dropped because a channel was NaN or infinite
 
     def __post_init__(self) -> None:
         self.lane_flags = light_flags(self.scene, self.light.entity.take(self.light.offset[:-1]))
@@ -78,8 +79,12 @@ class Contributions(Connections):
         return int(self.lane.size)
 
 
-def _nonzero(value: np.ndarray) -> np.ndarray:
-    return (value != 0).any(axis=0) & np.isfinite(value).all(axis=0)
+def _useful(batch: Batch, value: np.ndarray) -> np.ndarray:
+    """Indices of the contributions (C, n) worth weighting: non-zero and finite; the non-finite ones
+    are counted in ``batch.nonfinite`` (they never reach the film)."""
+    finite = np.isfinite(value).all(axis=0)
+    batch.nonfinite += int(finite.size - np.count_nonzero(finite))
+    return np.flatnonzero((value != 0).any(axis=0) & finite)
 
 
 def _materials(batch: Batch, sub: Subpaths, v: np.ndarray, lanes: np.ndarray):
@@ -120,7 +125,7 @@ def emitter_hits(batch: Batch) -> Contributions | None:
     if at_infinity.size:
         le[:, at_infinity] = lights.environment_radiance(at_infinity.size, colours.take(at_infinity))
     value = np.take(eye.beta, v, axis=1) * le
-    keep = _nonzero(value)
+    keep = _useful(batch, value)
     v, lane, entity, n, wo, value = v[keep], lane[keep], entity[keep], n[:, keep], wo[:, keep], value[:, keep]
     # The light walk would start here (pt_rev) and go on to z_{t-2} (pt_minus_rev): emission's directional
     # density, or from infinity the disk density times |cos| there.
@@ -150,7 +155,7 @@ def light_samples(batch: Batch) -> Contributions | None:
     f_cos, pdf_bsdf = materials.eval(surface, ls.wi)
     with np.errstate(divide="ignore", invalid="ignore"):
         value = np.where(ls.facing & (ls.pdf > 0), np.take(eye.beta, v, axis=1) * f_cos * ls.value / ls.pdf, 0.0)
-    useful = np.flatnonzero(_nonzero(value))
+    useful = _useful(batch, value)
     batch.rays += useful.size
     useful = useful[~light_sample_blocked(scene, p, eye.eps.take(v), n, ls, useful)]
     if not useful.size:
@@ -209,7 +214,7 @@ def lens_samples(batch: Batch) -> Contributions | None:
         pdf_back[surface] = reverse_pdf(materials, ns, wis, wo)
     with np.errstate(divide="ignore", invalid="ignore"):
         value = np.where(valid & (pdf_lens > 0), beta * value * (we / pdf_lens), 0.0)
-    useful = np.flatnonzero(_nonzero(value))
+    useful = _useful(batch, value)
     batch.rays += useful.size
     lens32 = np.take(lens, useful, axis=1).astype(np.float32)
     axis = np.repeat(camera.forward.astype(np.float32)[:, None], useful.size, axis=1)
@@ -254,7 +259,7 @@ def lens_hits(batch: Batch) -> Contributions | None:
     leaving = -d.astype(np.float64)
     raster, inside = camera.raster(point + leaving, point)
     value = np.where(inside, hits.beta[:, keep] * camera.importance(leaving, point), 0.0)
-    useful = np.flatnonzero(_nonzero(value))
+    useful = _useful(batch, value)
     if not useful.size:
         return None
     lane, index, point, leaving, value, raster = (lane[useful], index[useful], point[:, useful], leaving[:, useful],
@@ -323,7 +328,7 @@ def _join(batch: Batch, lane, y, z, s, t) -> Contributions | None:
     with np.errstate(divide="ignore", invalid="ignore"):
         value = np.where(dist2 > 0, np.take(light.beta, y, axis=1) * f_y * f_z * np.take(eye.beta, z, axis=1) / dist2,
                          0.0)
-    useful = np.flatnonzero(_nonzero(value))
+    useful = _useful(batch, value)
     batch.rays += useful.size
     blocked = segment_blocked(scene, np.take(py, useful, axis=1), light.eps.take(y.take(useful)),
                               np.take(ny, useful, axis=1), np.take(pz, useful, axis=1), eye.eps.take(z.take(useful)),

@@ -363,8 +363,7 @@ def light_subpaths(scene, u: np.ndarray, sampler, colours, options: dict, q_tabl
     lights = scene.lights
     count = u.shape[1]
     lanes = np.arange(count)
-    lo, hi = scene.mesh.bounds()
-    e = lights.sample_emission(u[0:5], colours, "power", 0.5 * (lo + hi))
+    e = lights.sample_emission(u[0:5], colours, "power")
     with np.errstate(divide="ignore", invalid="ignore"):
         beta0 = np.where(e.pdf_pos > 0, 1.0 / e.pdf_pos, 0.0)
         beta = e.value * np.where(e.pdf_dir > 0, beta0 * e.cos_light / e.pdf_dir, 0.0)

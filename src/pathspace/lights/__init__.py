@@ -86,7 +86,9 @@ class LightSample:
 class LightSet:
     """All lights of a scene; see the module docstring."""
 
-    def __init__(self, area: AreaLights, others: list, scene_radius: float) -> None:
+    def __init__(self, area: AreaLights, others: list, scene_center, scene_radius: float) -> None:
+        """``scene_center`` and ``scene_radius``: a sphere holding all geometry and the camera's lens; rays
+        from infinite lights start on a disk just outside it, and their power is what crosses it."""
         self.area = area
         self.points = [light for light in others if isinstance(light, PointLight)]
         self.spots = [light for light in others if isinstance(light, SpotLight)]
@@ -96,6 +98,7 @@ class LightSet:
             raise ValueError("at most one environment light is supported")
         self.environment = environments[0] if environments else None
         self.others = list(others)
+        self.scene_center = np.asarray(scene_center, dtype=np.float64)
         self.scene_radius = float(scene_radius)
         kinds = [np.full(area.count, AREA)]
         index = [np.arange(area.count)]
@@ -257,7 +260,7 @@ class LightSet:
             return np.zeros((colours.channels, count))
         return colours.lookup(self.environment_table, np.zeros(count, dtype=np.int64))
 
-    def sample_emission(self, u: np.ndarray, colours, selection: str, scene_center: np.ndarray) -> EmissionSample:
+    def sample_emission(self, u: np.ndarray, colours, selection: str) -> EmissionSample:
         """Sample rays leaving the lights: an entity by ``selection``, a point, a direction (u: (5, N))."""
         count = u.shape[1]
         entity = np.minimum(np.searchsorted(self._cdfs[selection], u[0], side="right"), self.count - 1)
@@ -318,7 +321,7 @@ class LightSet:
                 s, t = orthonormal_basis(d.astype(np.float64))
                 r = radius * np.sqrt(u[3, lanes])
                 phi = 2 * np.pi * u[4, lanes]
-                start = scene_center[:, None] - d * radius + s * (r * np.cos(phi)) + t * (r * np.sin(phi))
+                start = self.scene_center[:, None] - d * radius + s * (r * np.cos(phi)) + t * (r * np.sin(phi))
                 point[:, lanes] = start
                 direction[:, lanes] = d
                 normal[:, lanes] = d
