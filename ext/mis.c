@@ -10,9 +10,9 @@
  * (Veach 1997, eq. 10.9); the weight is 1 / sum over strategies s' of
  * (p_s' / p_s)^beta (power heuristic; beta = 1: balance).  Ratios are built up
  * one vertex at a time, as in pbrt-v4's MISWeight, so no product of raw pdfs
- * is ever formed, and carried as mantissa and binary exponent, so that paths of
- * hundreds of vertices whose densities span hundreds of decades stay exact to
- * rounding; a pdf of 0 (delta vertices) is remapped to 1 so that the
+ * is ever formed, and carried as a double that takes a separate binary exponent
+ * whenever it nears over- or underflow, so that paths of hundreds of vertices
+ * whose densities span hundreds of decades stay exact to rounding; a pdf of 0 (delta vertices) is remapped to 1 so that the
  * ratio through a delta vertex is 1, and a strategy is counted only if the
  * connection it needs joins two non-delta vertices (s' = 0: the light can be
  * hit; s' = k + 1: the camera can be hit).
@@ -57,6 +57,13 @@ typedef struct {
 
 static inline void ratio_times(Ratio *r, double numerator, double denominator)
 {
+    /* Common case: the factor and the product stay far from overflow and underflow, so a plain
+     * multiply is exact to rounding; otherwise fall back to exponent bookkeeping. */
+    double factor = numerator / denominator, product = r->mantissa * factor;
+    if (factor > 0x1p-300 && factor < 0x1p300 && product > 0x1p-600 && product < 0x1p600) {
+        r->mantissa = product;
+        return;
+    }
     int en, ed, er;
     double mn = frexp(numerator, &en), md = frexp(denominator, &ed);
     r->mantissa = frexp(r->mantissa * (mn / md), &er);
@@ -83,11 +90,20 @@ static inline double term(const Ratio *r, const MisBatch *b)
     if (b->heuristic == H_UNIFORM)
         return 1.0;
     double beta = b->heuristic == H_POWER ? b->beta : 1.0;
-    if (beta == 1.0 && labs(r->exponent) < 2000)
-        return ldexp(r->mantissa, (int)r->exponent);
-    if (beta == 2.0 && labs(r->exponent) < 1000)
-        return ldexp(r->mantissa * r->mantissa, (int)(2 * r->exponent));
-    double log2_value = beta * (log2(r->mantissa) + (double)r->exponent);
+    if (r->exponent == 0 && r->mantissa > 0x1p-500 && r->mantissa < 0x1p500) {
+        if (beta == 1.0)
+            return r->mantissa;
+        if (beta == 2.0)
+            return r->mantissa * r->mantissa;
+    }
+    int e;
+    double mantissa = frexp(r->mantissa, &e);
+    long exponent = r->exponent + e;
+    if (beta == 1.0 && labs(exponent) < 2000)
+        return ldexp(mantissa, (int)exponent);
+    if (beta == 2.0 && labs(exponent) < 1000)
+        return ldexp(mantissa * mantissa, (int)(2 * exponent));
+    double log2_value = beta * (log2(mantissa) + (double)exponent);
     return log2_value > 1100.0 ? INFINITY : exp2(log2_value);
 }
 

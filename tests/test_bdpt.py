@@ -215,10 +215,13 @@ def test_every_light_kind_outdoors(camera):
         np.testing.assert_allclose(result.image[sky], reference.image[sky], rtol=1e-2)
 
 
-def test_multi_tile_passes():
+def test_multi_tile_passes(monkeypatch):
     """Images larger than one item (a pass split over tiles) assemble their splats pass by pass: the
     same on one or two threads, and the same image as path tracing."""
-    s = scene("cornell-box", (192, 192))
+    from pathspace.integrators.bidirectional import Bidirectional
+
+    monkeypatch.setattr(Bidirectional, "tile_pixels", 1000)  # 64 x 64 pixels: 5 tiles per pass
+    s = scene("cornell-box", (64, 64))
     one = ps.render(s, "lt", spp=2, seed=3, threads=1)
     np.testing.assert_array_equal(one.image, ps.render(s, "lt", spp=2, seed=3, threads=2).image)
     lt = ps.render(s, "lt", spp=32, seed=4)

@@ -86,12 +86,18 @@ def test_weights_partition_unity_over_feasible_strategies(heuristic, beta, camer
             np.testing.assert_allclose(w[mine][ok], 1.0 / ok.sum(), rtol=1e-12)
 
 
-@pytest.mark.parametrize("heuristic", ["balance", "power", "uniform", "single", "none"])
-def test_c_kernel_matches_the_numpy_reference(heuristic):
+@pytest.mark.parametrize("heuristic, beta", [("balance", 1.0), ("power", 2.0), ("power", 2.5), ("uniform", 1.0),
+                                             ("single", 1.0), ("none", 1.0)])
+@pytest.mark.parametrize("decades", [3, 150], ids=["moderate", "extreme"])
+def test_c_kernel_matches_the_numpy_reference(heuristic, beta, decades):
+    """Moderate densities take the kernel's plain-multiply path, extreme ones its exponent bookkeeping."""
     rng = np.random.default_rng(11)
-    paths = [(*random_path(rng, int(rng.integers(1, 9))), random_flags(rng)) for _ in range(150)]
+    paths = []
+    for _ in range(150):
+        p_l, p_e, delta = random_path(rng, int(rng.integers(1, 9)))
+        paths.append((p_l ** (decades / 150), p_e ** (decades / 150), delta, random_flags(rng)))
     owner, connections, light, eye, light_flags = strategy_batch(paths)
-    args = (connections, light, eye, light_flags, False, heuristic, 2.5, (2, 3))
+    args = (connections, light, eye, light_flags, False, heuristic, beta, (2, 3))
     fast, slow = mis_weights(*args), mis_weights_reference(*args)
     np.testing.assert_allclose(fast, slow, rtol=1e-12, atol=0)
 

@@ -46,8 +46,9 @@ class Bidirectional:
     diffuse_sampling: str = "cosine"
     pyramid: int = 0
 
-    # Items of at most this many pixels: subpaths and connections of a batch stay within memory.
-    tile_pixels = TILE_PIXELS // 2
+    # Items of at most this many pixels: larger items spend less time in Python per sample (65536 lanes:
+    # 5% faster than 32768 on the Cornell box, about 0.5 GB at two threads; 131072 is slower again).
+    tile_pixels = TILE_PIXELS
     uses_camera_subpaths = True
 
     def __post_init__(self) -> None:
