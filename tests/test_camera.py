@@ -50,6 +50,22 @@ def test_importance_over_sampling_density_is_one(name):
 
 
 @pytest.mark.parametrize("name", CAMERAS)
+def test_importance_integrates_to_one_over_lens_area(name):
+    """The normalisation of We, independently of the camera's own sampling: over directions drawn
+    uniformly on the sphere, the integral of We cos at a lens point is 1 / lens_area (pbrt-v4's
+    convention: We cos integrates to 1 over lens area and solid angle)."""
+    camera = CAMERAS[name]
+    rng = np.random.default_rng(5)
+    count = 2_000_000
+    d = rng.standard_normal((3, count))
+    d /= np.linalg.norm(d, axis=0)
+    lens = camera.sample_lens(rng.random((2, count)))
+    f = camera.importance(d, lens) * np.maximum(camera.cos_to_axis(d), 0.0) * 4 * np.pi * camera.lens_area
+    mean, error = f.mean(), f.std() / np.sqrt(count)
+    assert abs(mean - 1.0) < 4 * error and error < 0.01, (mean, error)
+
+
+@pytest.mark.parametrize("name", CAMERAS)
 def test_raster_inverts_ray_generation(name):
     camera = CAMERAS[name]
     rng = np.random.default_rng(1)
