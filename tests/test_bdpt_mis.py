@@ -102,6 +102,34 @@ def test_c_kernel_matches_the_numpy_reference(heuristic, beta, decades):
     np.testing.assert_allclose(fast, slow, rtol=1e-12, atol=0)
 
 
+@pytest.mark.parametrize("heuristic, beta", [("balance", 1.0), ("power", 2.0), ("power", 2.5)])
+def test_ratios_that_pass_beyond_the_double_range_and_come_back(heuristic, beta):
+    """Ratio products that climb past 1e240 (or fall below 1e-240) over one subpath and return to O(1):
+    specular vertices in between make the strategies there infeasible, so only the end strategies
+    (s = 0, 1, k, k + 1) count and their weights are far from 0 and 1 -- the kernel must leave its
+    plain-multiply path and carry the exponent to get them right."""
+    rng = np.random.default_rng(5)
+    k = 12
+    paths = []
+    for sign in (1, -1) * 20:
+        p_l, p_e = np.ones(k + 1), np.ones(k + 1)
+        delta = np.zeros(k + 1, bool)
+        delta[2:k:2] = True
+        p_l[delta] = p_e[delta] = 0.0
+        exponents = sign * np.array([80, 80, 80, -80, -80, -80])
+        p_l[1:k:2] = 10.0 ** exponents * rng.uniform(0.5, 2.0, 6)
+        p_l[[0, k]], p_e[[0, k]] = rng.uniform(0.5, 2.0, 2), rng.uniform(0.5, 2.0, 2)
+        paths.append((p_l, p_e, delta, 0))
+    owner, connections, light, eye, light_flags = strategy_batch(paths)
+    args = (connections, light, eye, light_flags, False, heuristic, beta)
+    fast, slow = mis_weights(*args), mis_weights_reference(*args)
+    np.testing.assert_allclose(fast, slow, rtol=1e-12, atol=0)
+    ends = np.isin(connections.s, [0, 1, k, k + 1])
+    assert np.all(fast[~ends] == 0.0) and np.all((fast[ends] > 1e-6) & (fast[ends] < 1 - 1e-6))
+    for index in range(len(paths)):
+        assert abs(fast[owner == index].sum() - 1.0) < 1e-9
+
+
 def test_scale_invariance_of_ratios():
     """Scaling every density by the same factor (a scene scaled by 1/sqrt(factor)) leaves every weight unchanged."""
     rng = np.random.default_rng(3)

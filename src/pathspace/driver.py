@@ -53,8 +53,9 @@ class RenderResult:
     image : (height, width, 3) float64, the per-pixel mean in linear sRGB
     variance : (height, width, 3) float64, estimated variance of that mean
     stats : estimator, parameters, colour mode and why, spp, seconds, samples per second, rays,
-        nonfinite (samples, or bidirectional contributions, dropped for a NaN or Inf), truncated
-        (paths cut at the safety depth), longest_subpath
+        nonfinite (pixel samples dropped at the film for a NaN or Inf), nonfinite_contributions
+        (bidirectional estimators: connections whose value or MIS weight was NaN or Inf, dropped from
+        their sample, which itself is kept), truncated (paths cut at the safety depth), longest_subpath
         (segments of the longest path, or subpath for bidirectional estimators), ...
     film : the film with the raw sums (RGB, or XYZ for spectral renders) for merging or further passes
     xyz : (height, width, 3) CIE XYZ of a spectral render (None for RGB renders)
@@ -76,7 +77,9 @@ class RenderResult:
                 f"({s['samples_per_second'] / 1e6:.3f} M samples/s, {s['rays_per_second'] / 1e6:.2f} M rays/s, "
                 f"{s['threads']} threads)")
         if s["nonfinite"]:
-            text += f"; {s['nonfinite']} non-finite samples or contributions were dropped"
+            text += f"; {s['nonfinite']} non-finite samples were dropped"
+        if s["nonfinite_contributions"]:
+            text += f"; {s['nonfinite_contributions']} non-finite connections were dropped"
         if s["truncated"]:
             text += f"; {s['truncated']} paths were cut at the safety depth"
         return text
@@ -175,7 +178,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
     done = threading.Condition()
     results: dict[int, tuple] = {}
     failures: list[BaseException] = []
-    counters = [{"rays": 0, "truncated": 0, "longest": 0, "nonfinite": 0} for _ in range(threads)]
+    counters = [{"rays": 0, "truncated": 0, "longest": 0, "nonfinite_contributions": 0} for _ in range(threads)]
     running = [threads]
 
     def work(k: int) -> None:
@@ -257,7 +260,8 @@ def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int 
         "rays_per_second": rays / seconds,
         "mode": mode.name,
         "mode_reason": mode_reason,
-        "nonfinite": film.nonfinite + sum(c["nonfinite"] for c in counters),
+        "nonfinite": film.nonfinite,
+        "nonfinite_contributions": sum(c["nonfinite_contributions"] for c in counters),
         "truncated": truncated,
         "longest_subpath": max(c["longest"] for c in counters),
         "scene": scene.source,

@@ -122,7 +122,12 @@ class Bidirectional:
         own = np.zeros((colours.channels, count))
         strategies: dict | None = {} if self.pyramid else None
         for part in self._contributions(batch):
-            weighted = part.value * self._weights(part, batch)[None, :]
+            weights = self._weights(part, batch)
+            finite = np.isfinite(weights)
+            if not finite.all():  # from non-finite densities: dropped and counted like non-finite values
+                batch.nonfinite += int(finite.size - np.count_nonzero(finite))
+                weights = np.where(finite, weights, 0.0)
+            weighted = part.value * weights[None, :]
             splat = np.isfinite(part.raster[0])
             mine = np.flatnonzero(~splat)
             if mine.size:
@@ -139,7 +144,7 @@ class Bidirectional:
             if strategies is not None:
                 self._record_strategies(strategies, part, weighted, film_pixel, mode, state, pixels)
         counters["rays"] += batch.rays
-        counters["nonfinite"] += batch.nonfinite
+        counters["nonfinite_contributions"] += batch.nonfinite
         return item, mode.to_film(own, state, np.arange(count)), splats, strategies
 
     def _record_strategies(self, strategies: dict, part: Contributions, weighted: np.ndarray, film_pixel, mode,

@@ -49,7 +49,7 @@ class Batch:
     options: dict
     max_depth: int     # segments
     rays: int = 0      # shadow rays traced
-    nonfinite: int = 0  # contributions dropped because a channel was NaN or infinite
+    nonfinite: int = 0  # contributions dropped because a channel or their weight was NaN or infinite
 
     def __post_init__(self) -> None:
         self.lane_flags = light_flags(self.scene, self.light.entity.take(self.light.offset[:-1]))

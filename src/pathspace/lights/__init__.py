@@ -86,9 +86,11 @@ class LightSample:
 class LightSet:
     """All lights of a scene; see the module docstring."""
 
-    def __init__(self, area: AreaLights, others: list, scene_center, scene_radius: float) -> None:
-        """``scene_center`` and ``scene_radius``: a sphere holding all geometry and the camera's lens; rays
-        from infinite lights start on a disk just outside it, and their power is what crosses it."""
+    def __init__(self, area: AreaLights, others: list, scene_radius: float, disk_center, disk_radius: float) -> None:
+        """``scene_radius``: of a sphere holding all geometry; the power of an infinite light (for light
+        selection) is what crosses it.  ``disk_center``, ``disk_radius``: a sphere holding all geometry
+        and the camera's lens (a thin lens can be hit); rays from infinite lights start on a disk just
+        outside it (:meth:`sample_emission`)."""
         self.area = area
         self.points = [light for light in others if isinstance(light, PointLight)]
         self.spots = [light for light in others if isinstance(light, SpotLight)]
@@ -98,8 +100,9 @@ class LightSet:
             raise ValueError("at most one environment light is supported")
         self.environment = environments[0] if environments else None
         self.others = list(others)
-        self.scene_center = np.asarray(scene_center, dtype=np.float64)
         self.scene_radius = float(scene_radius)
+        self.disk_center = np.asarray(disk_center, dtype=np.float64)
+        self.disk_radius = float(disk_radius) * 1.01 + 1e-30
         kinds = [np.full(area.count, AREA)]
         index = [np.arange(area.count)]
         power = [area.power]
@@ -275,7 +278,7 @@ class LightSet:
         pdf_pos = np.zeros(count)
         pdf_dir = np.ones(count)
         cos_light = np.ones(count)
-        radius = self.scene_radius * 1.01 + 1e-30
+        radius = self.disk_radius
         for k in np.unique(kind):
             lanes = np.flatnonzero(kind == k)
             idx, mine = index.take(lanes), colours.take(lanes)
@@ -321,7 +324,7 @@ class LightSet:
                 s, t = orthonormal_basis(d.astype(np.float64))
                 r = radius * np.sqrt(u[3, lanes])
                 phi = 2 * np.pi * u[4, lanes]
-                start = self.scene_center[:, None] - d * radius + s * (r * np.cos(phi)) + t * (r * np.sin(phi))
+                start = self.disk_center[:, None] - d * radius + s * (r * np.cos(phi)) + t * (r * np.sin(phi))
                 point[:, lanes] = start
                 direction[:, lanes] = d
                 normal[:, lanes] = d
@@ -406,6 +409,6 @@ class LightSet:
                     inside = spot.axis @ np.take(direction, mine, axis=1).astype(np.float64) >= cos_total
                     out[mine] = np.where(inside, 1.0 / (2 * np.pi * (1.0 - cos_total)), 0.0)
             else:
-                radius = self.scene_radius * 1.01 + 1e-30
+                radius = self.disk_radius
                 out[lanes] = 1.0 / (np.pi * radius * radius)
         return out

@@ -116,14 +116,15 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>",
     area = AreaLights(mesh, np.concatenate(emit_tris or [np.zeros(0, np.int64)]),
                       np.concatenate(emit_light or [np.zeros(0, np.int64)]), ColourTable(emit_radiance, "illuminant"),
                       np.array(emit_two_sided, dtype=bool))
-    # The sphere infinite lights shine into holds the geometry and the camera's lens (light tracing and
-    # BDPT start their rays on a disk just outside it).
+    # Infinite lights: their power (for light selection) is what crosses the geometry's bounding sphere;
+    # light tracing and BDPT start their rays on a disk outside a sphere that also holds a thin lens.
     lo, hi = mesh.bounds()
-    lens = camera.lens_radius
-    lo = np.minimum(lo, camera.position - lens)
-    hi = np.maximum(hi, camera.position + lens)
-    lights = LightSet(area, other_lights, scene_center=0.5 * (lo + hi),
-                      scene_radius=0.5 * float(np.linalg.norm(hi - lo)))
+    scene_radius = 0.5 * float(np.linalg.norm(hi - lo))
+    if camera.lens_radius > 0:
+        lo = np.minimum(lo, camera.position - camera.lens_radius)
+        hi = np.maximum(hi, camera.position + camera.lens_radius)
+    lights = LightSet(area, other_lights, scene_radius=scene_radius, disk_center=0.5 * (lo + hi),
+                      disk_radius=0.5 * float(np.linalg.norm(hi - lo)))
     return Scene(camera=camera, mesh=mesh, materials=MaterialTable(material_names, materials), lights=lights,
                  shape_names=names, source=source)
 
