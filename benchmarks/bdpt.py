@@ -24,17 +24,21 @@ import numpy as np
 
 import pathspace as ps
 from pathspace.integrators.bdpt_mis import Connections, SubpathPdfs, mis_weights
+from pathspace.metrics import RELMSE_EPSILON, relmse
 
 ROOT = Path(__file__).resolve().parent.parent
 TARGET = 1e-2
 SPP = {"pt": (16, 64), "lt": (16, 64), "bdpt": (4, 16)}
 
 
+def reference_floor(reference) -> float:
+    """The reference's own expected contribution to relMSE (its variance over the relMSE denominator)."""
+    return float(np.mean(reference.variance / (reference.image ** 2 + RELMSE_EPSILON)))
+
+
 def rel_mse(result, reference) -> float:
     """relMSE against the reference, minus the reference's own expected contribution."""
-    denominator = reference.image ** 2 + 0.01
-    raw = np.mean((result.image - reference.image) ** 2 / denominator)
-    return float(raw - np.mean(reference.variance / denominator))
+    return relmse(result.image, reference.image) - reference_floor(reference)
 
 
 def mis_kernel_rate(connections: int = 1_000_000, length: int = 5) -> float:
@@ -69,7 +73,7 @@ def main(argv=None) -> None:
             ps.render(scene, estimator, spp=1, seed=0, threads=args.threads)
         t0 = time.perf_counter()
         reference = ps.render(scene, "pt", spp=args.reference_spp, seed=1000, threads=args.threads)
-        floor = float(np.mean(reference.variance / (reference.image ** 2 + 0.01)))
+        floor = reference_floor(reference)
         print(f"\n{name}: reference pt {args.reference_spp} spp in {time.perf_counter() - t0:.0f} s "
               f"(its own relMSE {floor:.2e}, subtracted)")
         times = {}

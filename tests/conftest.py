@@ -1,22 +1,58 @@
 """Shared fixtures: the repository's scenes and small variants of them."""
 from __future__ import annotations
 
+import copy
 import tomllib
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import pathspace as ps
+from pathspace.validate import compare_estimates
 
 ROOT = Path(__file__).resolve().parent.parent
 CORNELL = ROOT / "scenes" / "cornell-box" / "scene.toml"
 
 
-def cornell_dict(resolution=(64, 64)) -> dict:
-    """The Cornell box scene file as a dict, with another resolution."""
-    data = tomllib.loads(CORNELL.read_text())
+def scene_dict(name: str, resolution=(32, 32)) -> dict:
+    """The scene file ``scenes/NAME/scene.toml`` as a dict, with another resolution."""
+    data = tomllib.loads((ROOT / "scenes" / name / "scene.toml").read_text())
     data["camera"]["resolution"] = list(resolution)
     return data
+
+
+def cornell_dict(resolution=(64, 64)) -> dict:
+    """The Cornell box scene file as a dict, with another resolution."""
+    return scene_dict("cornell-box", resolution)
+
+
+def scaled(data: dict, factor: float) -> dict:
+    """The same scene with every length multiplied by ``factor`` (radiance is scale-free)."""
+    data = copy.deepcopy(data)
+    for shape in data["shapes"]:
+        shape.setdefault("transform", {})
+        transform = shape["transform"]
+        transform["scale"] = np.multiply(transform.get("scale", 1.0), factor).tolist()
+        transform["translate"] = (np.asarray(transform.get("translate", [0.0, 0.0, 0.0])) * factor).tolist()
+    camera = data["camera"]
+    for key in ("position", "look_at"):
+        camera[key] = (np.asarray(camera[key]) * factor).tolist()
+    if "focus_distance" in camera:
+        camera["focus_distance"] *= factor
+        camera["aperture_radius"] *= factor
+    return data
+
+
+def agree(a, b, block=8, alpha=1e-3, mask=None) -> tuple[bool, str]:
+    """Whether renders ``a`` and ``b`` estimate the same image (block-wise z-test), and the report;
+    pixels outside ``mask`` are left out (set equal in both)."""
+    image_b, variance_b = b.image, b.variance
+    if mask is not None:
+        image_b = np.where(mask[..., None], b.image, a.image)
+        variance_b = np.where(mask[..., None], b.variance, a.variance)
+    result = compare_estimates(a.image, a.variance, image_b, variance_b, block=block, alpha=alpha)
+    return result.passed, str(result)
 
 
 @pytest.fixture(scope="session")

@@ -2,37 +2,18 @@
 long paths, scale and extremes, determinism, the strategy pyramid."""
 from __future__ import annotations
 
-import copy
-import tomllib
-
 import numpy as np
 import pytest
 
 import pathspace as ps
-from pathspace.validate import compare_estimates, furnace_radiance
-from conftest import ROOT
-
-
-def scene_dict(name: str, resolution=(32, 32)) -> dict:
-    data = tomllib.loads((ROOT / "scenes" / name / "scene.toml").read_text())
-    data["camera"]["resolution"] = list(resolution)
-    return data
+from pathspace.validate import furnace_radiance
+from conftest import agree, scaled, scene_dict
 
 
 def scene(name: str, resolution=(32, 32), **camera) -> ps.Scene:
     data = scene_dict(name, resolution)
     data["camera"].update(camera)
     return ps.scene_from_dict(data, source=name)
-
-
-def agree(a, b, block=8, alpha=1e-3, mask=None):
-    """Block-wise comparison; pixels outside ``mask`` are left out (set equal in both)."""
-    image_b, variance_b = b.image, b.variance
-    if mask is not None:
-        image_b = np.where(mask[..., None], b.image, a.image)
-        variance_b = np.where(mask[..., None], b.variance, a.variance)
-    result = compare_estimates(a.image, a.variance, image_b, variance_b, block=block, alpha=alpha)
-    return result.passed, str(result)
 
 
 def no_nonfinite(result) -> bool:
@@ -256,8 +237,6 @@ def test_multi_tile_passes(monkeypatch):
 
 @pytest.mark.parametrize("factor", [1e-6, 1e6])
 def test_scale_invariance(factor):
-    from test_robustness import scaled
-
     data = scene_dict("cornell-box")
     reference = ps.render(ps.scene_from_dict(data), "bdpt", spp=128, seed=1)
     other = ps.render(ps.scene_from_dict(scaled(data, factor)), "bdpt", spp=128, seed=2)

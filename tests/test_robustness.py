@@ -1,43 +1,10 @@
 """Renders do not depend on the scene's scale or on far-away geometry; tiny bright lights stay unbiased."""
 from __future__ import annotations
 
-import copy
-import tomllib
-
-import numpy as np
 import pytest
 
 import pathspace as ps
-from pathspace.validate import compare_estimates
-from conftest import ROOT
-
-
-def scene_dict(name: str, resolution=(32, 32)) -> dict:
-    data = tomllib.loads((ROOT / "scenes" / name / "scene.toml").read_text())
-    data["camera"]["resolution"] = list(resolution)
-    return data
-
-
-def scaled(data: dict, factor: float) -> dict:
-    """The same scene with every length multiplied by ``factor`` (radiance is scale-free)."""
-    data = copy.deepcopy(data)
-    for shape in data["shapes"]:
-        shape.setdefault("transform", {})
-        transform = shape["transform"]
-        transform["scale"] = np.multiply(transform.get("scale", 1.0), factor).tolist()
-        transform["translate"] = (np.asarray(transform.get("translate", [0.0, 0.0, 0.0])) * factor).tolist()
-    camera = data["camera"]
-    for key in ("position", "look_at"):
-        camera[key] = (np.asarray(camera[key]) * factor).tolist()
-    if "focus_distance" in camera:
-        camera["focus_distance"] *= factor
-        camera["aperture_radius"] *= factor
-    return data
-
-
-def agree(a, b, block=8):
-    result = compare_estimates(a.image, a.variance, b.image, b.variance, block=block, alpha=1e-3)
-    return result.passed, str(result)
+from conftest import agree, scaled, scene_dict
 
 
 @pytest.mark.parametrize("name", ["cornell-box", "cornell-box-specular"])

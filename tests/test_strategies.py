@@ -9,7 +9,7 @@ import pytest
 import pathspace as ps
 from pathspace.bsdfs import Diffuse
 from pathspace.validate import compare_estimates
-from conftest import ROOT
+from conftest import ROOT, agree
 
 
 def scene(name: str, resolution=(64, 64), **changes) -> ps.Scene:
@@ -18,12 +18,6 @@ def scene(name: str, resolution=(64, 64), **changes) -> ps.Scene:
     for key, value in changes.items():
         data[key] = value
     return ps.scene_from_dict(data, source=name)
-
-
-def agree(reference, other, block=8, alpha=1e-3):
-    result = compare_estimates(reference.image, reference.variance, other.image, other.variance, block=block,
-                               alpha=alpha)
-    return result.passed, str(result)
 
 
 @pytest.fixture(scope="module")

@@ -143,10 +143,12 @@ class PinholeCamera:
 
     def importance(self, directions: np.ndarray, lens_points: np.ndarray | None = None) -> np.ndarray:
         """We = 1 / (A lens_area cos^4 theta) for unit directions leaving lens points onto the film, else 0."""
-        cos = self.cos_to_axis(directions)
+        return self._importance(self.cos_to_axis(directions), self._on_film(directions, lens_points))
+
+    def _importance(self, cos: np.ndarray, on_film: np.ndarray) -> np.ndarray:
+        """We from the cosine to the axis, where ``on_film``; else 0."""
         with np.errstate(divide="ignore", invalid="ignore"):
-            value = 1.0 / (self.image_area * self.lens_area * cos ** 4)
-        return np.where(self._on_film(directions, lens_points), value, 0.0)
+            return np.where(on_film, 1.0 / (self.image_area * self.lens_area * cos ** 4), 0.0)
 
     def pdf_direction(self, directions: np.ndarray, lens_points: np.ndarray | None = None) -> np.ndarray:
         """Solid-angle density 1 / (A cos^3 theta) of primary-ray directions (0 off the film)."""
@@ -183,8 +185,7 @@ class PinholeCamera:
         wi = to_lens / dist
         raster, on_film = self.raster(receivers, lens)
         cos = self.cos_to_axis(-wi)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            we = np.where(on_film, 1.0 / (self.image_area * self.lens_area * cos ** 4), 0.0)  # importance()
+        we = self._importance(cos, on_film)
         with np.errstate(divide="ignore", invalid="ignore"):
             pdf = dist2 / (np.abs(cos) * self.lens_area)
         return wi, we, pdf, lens, raster, on_film & (we > 0)

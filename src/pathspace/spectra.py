@@ -30,7 +30,6 @@ import csv
 import os
 from dataclasses import dataclass
 from functools import lru_cache
-from pathlib import Path
 from typing import Union
 
 import numpy as np

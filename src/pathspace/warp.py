@@ -12,6 +12,7 @@ import numpy as np
 __all__ = [
     "square_to_uniform_sphere",
     "square_to_uniform_sphere_pdf",
+    "square_to_cosine_about",
     "square_to_uniform_triangle",
 ]
 
@@ -31,6 +32,15 @@ def square_to_uniform_sphere(u: np.ndarray) -> np.ndarray:
 def square_to_uniform_sphere_pdf(v: np.ndarray) -> np.ndarray:
     """Solid-angle density of :func:`square_to_uniform_sphere`."""
     return np.full(v.shape[1], INV_FOUR_PI)
+
+
+def square_to_cosine_about(n: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """Directions with density max(cos, 0) / pi about unit normals n (3, N), without a tangent frame:
+    n plus a uniform point on the unit sphere, normalised (Archimedes' hat-box theorem)."""
+    d = n + square_to_uniform_sphere(u)
+    length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
+    # The sum vanishes only when the sphere point is exactly -n (probability 0).
+    return np.where(length > 1e-6, d / np.maximum(length, np.float32(1e-6)), n)
 
 
 def square_to_uniform_triangle(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

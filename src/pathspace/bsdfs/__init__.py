@@ -35,7 +35,7 @@ class MaterialTable:
     local_id : (M,) int32, index of each material within its kind's tables
     tables : per kind, the parameter tables of its materials
     delta : (M,) bool, whether a material only has delta lobes
-    transmissive : whether some material can send light through the surface
+    delta_names : the names of those materials
     """
 
     def __init__(self, names: list[str], materials: list) -> None:
@@ -58,7 +58,7 @@ class MaterialTable:
             members[k].append(material)
         self.tables = [model.tables(group) for model, group in zip(self.kinds, members)]
         self.delta = np.array([type(m).delta for m in materials], dtype=bool)
-        self.transmissive = any(isinstance(m, Dielectric) for m in materials)
+        self.delta_names = [name for name, delta in zip(self.names, self.delta) if delta]
 
     def __len__(self) -> int:
         return len(self.materials)

@@ -69,18 +69,15 @@ class Diffuse:
     def sample(params: DiffuseParams, surface: Surface, u, mode="radiance") -> BSDFSample:
         """A direction by the chosen technique."""
         n_f = surface.n
-        sphere = warp.square_to_uniform_sphere(u[1:3])
         if params.technique == "uniform":
+            sphere = warp.square_to_uniform_sphere(u[1:3])
             side = np.copysign(np.float32(1), n_f[0] * sphere[0] + n_f[1] * sphere[1] + n_f[2] * sphere[2])
             wi = sphere * side
             cos_i = np.abs(n_f[0] * wi[0] + n_f[1] * wi[1] + n_f[2] * wi[2]).astype(np.float64)
             weight = params.albedo * (2.0 * cos_i)
             pdf = np.full(cos_i.shape, warp.INV_TWO_PI)
         else:
-            wi = n_f + sphere
-            length = np.sqrt(wi[0] * wi[0] + wi[1] * wi[1] + wi[2] * wi[2])
-            # The sum vanishes only when the sphere point is exactly -n (probability 0).
-            wi = np.where(length > 1e-6, wi / np.maximum(length, np.float32(1e-6)), n_f)
+            wi = warp.square_to_cosine_about(n_f, u[1:3])
             pdf = np.maximum(n_f[0] * wi[0] + n_f[1] * wi[1] + n_f[2] * wi[2], 0).astype(np.float64) * warp.INV_PI
             weight = params.albedo
         return BSDFSample(wi, weight, pdf, np.zeros(pdf.shape, dtype=bool))

@@ -92,7 +92,7 @@ class BDPT(Bidirectional):
             lines.append("point/spot/directional lights: no s = 0 strategy for their paths (rays cannot hit them)")
         if lights.environment is not None:
             lines.append("environment: camera subpaths that leave the scene end on it (s = 0)")
-        delta = [n for n, m in zip(scene.materials.names, scene.materials.materials) if m.delta]
+        delta = scene.materials.delta_names
         if delta:
             lines.append(f"specular materials ({', '.join(delta)}): no connection through their vertices")
         return lines

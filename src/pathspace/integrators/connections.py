@@ -87,12 +87,16 @@ def _useful(batch: Batch, value: np.ndarray) -> np.ndarray:
     return np.flatnonzero((value != 0).any(axis=0) & finite)
 
 
+def _material_lanes(batch: Batch, sub: Subpaths, v: np.ndarray, lanes: np.ndarray) -> MaterialLanes:
+    """The materials of vertices ``v`` (of lanes ``lanes``)."""
+    return MaterialLanes(batch.scene.materials, sub.material.take(v), batch.colours.take(lanes), batch.options)
+
+
 def _materials(batch: Batch, sub: Subpaths, v: np.ndarray, lanes: np.ndarray):
-    """Materials and surfaces (seen from the previous vertex) of vertices ``v``."""
+    """Materials and surfaces (seen from the previous vertex) of vertices ``v``, their normals and ``wo``."""
     n = np.take(sub.n, v, axis=1)
     wo = np.take(sub.wo, v, axis=1)
-    materials = MaterialLanes(batch.scene.materials, sub.material.take(v), batch.colours.take(lanes), batch.options)
-    return materials, Surface.facing(n, -wo), n, wo
+    return _material_lanes(batch, sub, v, lanes), Surface.facing(n, -wo), n, wo
 
 
 def _density_at_previous(pdf_sa: np.ndarray, sub: Subpaths, v: np.ndarray) -> np.ndarray:
@@ -171,8 +175,7 @@ def light_samples(batch: Batch) -> Contributions | None:
     pdf_emit = lights.emission_pdf_dir(entity, normal, -wi)
     cos_here = np.abs(dot(n, wi)).astype(np.float64)
     pt_rev = np.where(infinite, pdf_emit * cos_here, to_area(pdf_emit, n, wi, dist2))
-    sub_materials = MaterialLanes(scene.materials, eye.material.take(v), batch.colours.take(lane), batch.options)
-    pt_minus_rev = _density_at_previous(reverse_pdf(sub_materials, n, wi, wo) * q, eye, v)
+    pt_minus_rev = _density_at_previous(reverse_pdf(_material_lanes(batch, eye, v, lane), n, wi, wo) * q, eye, v)
     return Contributions.make(lane, 1, eye.index.take(v) + 1, value, qs_fwd=lights.origin_pdf(entity),
                               qs_rev=qs_rev, pt_fwd=eye.fwd.take(v), pt_rev=pt_rev, pt_minus_rev=pt_minus_rev,
                               flags=light_flags(scene, entity))
@@ -340,9 +343,7 @@ def _join(batch: Batch, lane, y, z, s, t) -> Contributions | None:
     lane, y, z, s, t, value, w, dist2 = map(pick, (lane, y, z, s, t, value, w, dist2))
     ny, nz, wo_y, wo_z, pdf_y, pdf_z = map(pick, (ny, nz, wo_y, wo_z, pdf_y, pdf_z))
     q_y, q_z = light.q.take(y), eye.q.take(z)
-    colours = batch.colours.take(lane)
-    mat_y = MaterialLanes(scene.materials, light.material.take(y), colours, batch.options)
-    mat_z = MaterialLanes(scene.materials, eye.material.take(z), colours, batch.options)
+    mat_y, mat_z = _material_lanes(batch, light, y, lane), _material_lanes(batch, eye, z, lane)
     return Contributions.make(
         lane, s, t, value,
         qs_fwd=light.fwd.take(y), qs_rev=to_area(pdf_z * q_z, ny, w, dist2),

@@ -35,7 +35,7 @@ class LightTracer(Bidirectional):
         """What this estimator will do on ``scene``, and what it leaves out and why."""
         depth = "unbounded" if self.max_depth < 0 else self.max_depth
         lines = [f"light tracing, max_depth={depth}; Russian roulette: {self.rr}"]
-        delta = [n for n, m in zip(scene.materials.names, scene.materials.materials) if m.delta]
+        delta = scene.materials.delta_names
         if delta:
             lines.append(f"specular materials ({', '.join(delta)}): paths reaching the camera only through them "
                          "are not formed (those pixels miss that light)")

@@ -133,7 +133,7 @@ class PathTracer:
             lines.append({"nee": "next-event estimation only", "none": "BSDF sampling only"}[self.light_sampling])
         if lights.has_delta and self.light_sampling in ("mis", "nee"):
             lines.append("point/spot/directional lights: light sampling only (BSDF samples cannot hit them)")
-        delta = [n for n, m in zip(scene.materials.names, scene.materials.materials) if m.delta]
+        delta = scene.materials.delta_names
         lines.append(f"specular (delta) materials: {', '.join(delta)}: no light sampling at their vertices"
                      if delta else "no specular (delta) materials: no specular code runs")
         return lines
@@ -316,7 +316,6 @@ class PathTracer:
         lanes = np.flatnonzero(useful)
         if lanes.size:
             useful[lanes[light_sample_blocked(scene, p, eps, surface.n, ls, lanes)]] = False
-        scale = np.where(useful, scale, 0.0)
         return np.where(useful, beta * f_cos * (ls.value * scale), 0.0)
 
     # -- mixture sampling --------------------------------------------------------------------------

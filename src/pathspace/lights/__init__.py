@@ -56,13 +56,6 @@ class EmissionSample:
             setattr(self, name, fields[name])
 
 
-def _sample_cosine(n: np.ndarray, u: np.ndarray) -> np.ndarray:
-    """Cosine-distributed unit directions about unit normals n (3, N), float32."""
-    d = n + warp.square_to_uniform_sphere(u)
-    length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    return np.where(length > 1e-6, d / np.maximum(length, np.float32(1e-6)), n)
-
-
 class LightSample:
     """One light sample per receiver (N lanes)."""
 
@@ -283,14 +276,12 @@ class LightSet:
             lanes = np.flatnonzero(kind == k)
             idx, mine = index.take(lanes), colours.take(lanes)
             if k == AREA:
-                rows = np.take(self.area.table, idx, axis=1)
-                b1, b2 = warp.square_to_uniform_triangle(u[1:3, lanes])
-                p = rows[0:3] + rows[3:6] * b1.astype(np.float32) + rows[6:9] * b2.astype(np.float32)
+                rows, p = self.area.uniform_points(idx, u[1:3, lanes])
                 n = rows[9:12]
                 two = self.area.two_sided.take(idx)
                 side = np.where(two & (u[3, lanes] < 0.5), np.float32(-1), np.float32(1))
-                d = _sample_cosine(n * side, np.stack((np.where(two, (u[3, lanes] * 2) % 1.0, u[3, lanes]),
-                                                       u[4, lanes])))
+                u_side = np.where(two, (u[3, lanes] * 2) % 1.0, u[3, lanes])  # reused after choosing a side
+                d = warp.square_to_cosine_about(n * side, np.stack((u_side, u[4, lanes])))
                 cos = np.abs(dot(n, d)).astype(np.float64)
                 point[:, lanes], normal[:, lanes], direction[:, lanes] = p, n, d
                 tmin[lanes] = leave_distance(rows[12], dot(n, d))
@@ -341,14 +332,13 @@ class LightSet:
         for j in np.unique(idx):
             lanes = np.flatnonzero(idx == j)
             spot = self.spots[j]
-            cos_total = np.cos(np.radians(spot.cone_angle))
-            cos_theta = 1.0 - u[0, lanes] * (1.0 - cos_total)
+            cos_theta = 1.0 - u[0, lanes] * (1.0 - spot.cos_cone)
             sin_theta = np.sqrt(np.maximum(0.0, 1.0 - cos_theta * cos_theta))
             phi = 2 * np.pi * u[1, lanes]
             axis = np.repeat(spot.axis[:, None], lanes.size, axis=1)
             s, t = orthonormal_basis(axis)
             d[:, lanes] = s * (sin_theta * np.cos(phi)) + t * (sin_theta * np.sin(phi)) + axis * cos_theta
-            density[lanes] = 1.0 / (2 * np.pi * (1.0 - cos_total))
+            density[lanes] = spot.cone_density
             falloff[lanes] = spot.falloff(d[:, lanes].astype(np.float64))
         return d, density, falloff
 
@@ -405,9 +395,8 @@ class LightSet:
                 for j in np.unique(idx):
                     mine = lanes[idx == j]
                     spot = self.spots[j]
-                    cos_total = np.cos(np.radians(spot.cone_angle))
-                    inside = spot.axis @ np.take(direction, mine, axis=1).astype(np.float64) >= cos_total
-                    out[mine] = np.where(inside, 1.0 / (2 * np.pi * (1.0 - cos_total)), 0.0)
+                    inside = spot.axis @ np.take(direction, mine, axis=1).astype(np.float64) >= spot.cos_cone
+                    out[mine] = np.where(inside, spot.cone_density, 0.0)
             else:
                 radius = self.disk_radius
                 out[lanes] = 1.0 / (np.pi * radius * radius)

@@ -67,15 +67,19 @@ class AreaLights:
         """Number of emitting shapes."""
         return int(np.unique(self.light_of).size)
 
+    def uniform_points(self, emitter: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Points uniform in area on triangles ``emitter`` (density 1 / area): (their geometry rows, points)."""
+        rows = np.take(self.table, emitter, axis=1)
+        b1, b2 = square_to_uniform_triangle(u)
+        return rows, rows[0:3] + rows[3:6] * b1.astype(np.float32) + rows[6:9] * b2.astype(np.float32)
+
     def sample(self, emitter: np.ndarray, receivers: np.ndarray, u: np.ndarray, measure: str):
         """Points on triangles ``emitter`` for receivers (3, N): (point, normal, wi, distance, cos_light, pdf_sa).
 
         ``pdf_sa`` is the solid-angle density at the receiver given the triangle
         (the selection probability is not included).
         """
-        rows = np.take(self.table, emitter, axis=1)
-        b1, b2 = square_to_uniform_triangle(u)
-        point = rows[0:3] + rows[3:6] * b1.astype(np.float32) + rows[6:9] * b2.astype(np.float32)
+        rows, point = self.uniform_points(emitter, u)
         normal = rows[9:12]
         if measure == "solid_angle":
             point, omega = self._solid_angle_points(rows, receivers, point, u)

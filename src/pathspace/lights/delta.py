@@ -68,6 +68,16 @@ class SpotLight:
         return d / np.linalg.norm(d)
 
     @property
+    def cos_cone(self) -> float:
+        """Cosine of ``cone_angle``: directions beyond it get no light."""
+        return float(np.cos(np.radians(self.cone_angle)))
+
+    @property
+    def cone_density(self) -> float:
+        """Solid-angle density of directions uniform within the cone, 1 / (2 pi (1 - cos_cone))."""
+        return 1.0 / (2 * np.pi * (1.0 - self.cos_cone))
+
+    @property
     def power(self) -> float:
         cos_start, cos_end = np.cos(np.radians(self.falloff_start)), np.cos(np.radians(self.cone_angle))
         return mean_rgb(self.intensity) * 2.0 * np.pi * ((1.0 - cos_start) + (cos_start - cos_end) / 2.0)
