@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 import pathspace as ps
-from pathspace.integrators.bdpt_mis import Connections, SubpathPdfs, mis_weights
+from pathspace.mis import Connections, SubpathPdfs, mis_weights
 from pathspace.metrics import RELMSE_EPSILON, relmse
 
 ROOT = Path(__file__).resolve().parent.parent

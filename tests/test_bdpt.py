@@ -168,7 +168,7 @@ def test_sky_light_hits_a_thin_lens_far_outside_the_geometry():
                     "material": "grey"}],
         "lights": [{"type": "environment", "radiance": [1, 1, 1]}]})
     lights, camera = s.lights, s.camera
-    assert np.linalg.norm(camera.position - lights.disk_center) + camera.lens_radius <= lights.disk_radius
+    assert np.linalg.norm(camera.position - lights.context.disk_center) + camera.lens_radius <= lights.context.disk_radius
     hits = ps.render(s, "bdpt", spp=16384, seed=1, mis="single", strategy=(2, 0), max_depth=1)
     reference = ps.render(s, "pt", spp=64, seed=2, max_depth=1)
     sky = np.all(reference.variance < 1e-12, axis=-1) & (reference.image[..., 0] > 0.999)
@@ -224,7 +224,7 @@ def test_every_light_kind_outdoors(camera):
 def test_multi_tile_passes(monkeypatch):
     """Images larger than one item (a pass split over tiles) assemble their splats pass by pass: the
     same on one or two threads, and the same image as path tracing."""
-    from pathspace.integrators.bidirectional import Bidirectional
+    from pathspace.estimators.bidirectional import Bidirectional
 
     monkeypatch.setattr(Bidirectional, "tile_pixels", 1000)  # 64 x 64 pixels: 5 tiles per pass
     s = scene("cornell-box", (64, 64))
@@ -340,12 +340,12 @@ def test_pyramid_sums_to_the_image():
 
 def test_parameter_errors():
     with pytest.raises(ValueError, match=r"strategy: mis='single' needs \(s, t\)"):
-        ps.integrators.make_integrator("bdpt", mis="single")
+        ps.estimators.make_estimator("bdpt", mis="single")
     with pytest.raises(ValueError, match=r"mis: expected one of"):
-        ps.integrators.make_integrator("bdpt", mis="maximum")
+        ps.estimators.make_estimator("bdpt", mis="maximum")
     with pytest.raises(ValueError, match=r"rr: expected one of"):
-        ps.integrators.make_integrator("lt", rr="throughput")
+        ps.estimators.make_estimator("lt", rr="throughput")
     with pytest.raises(ValueError, match=r"max_depth"):
-        ps.integrators.make_integrator("bdpt", max_depth=0)
+        ps.estimators.make_estimator("bdpt", max_depth=0)
     with pytest.raises(ValueError, match=r"longer than max_depth=2"):
-        ps.integrators.make_integrator("bdpt", mis="single", strategy=(2, 2), max_depth=2)
+        ps.estimators.make_estimator("bdpt", mis="single", strategy=(2, 2), max_depth=2)

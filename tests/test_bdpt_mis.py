@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pathspace.integrators.bdpt_mis import (LIGHT_DELTA, LIGHT_INFINITE, Connections, SubpathPdfs, mis_weights,
+from pathspace.mis import (LIGHT_DELTA, LIGHT_INFINITE, Connections, SubpathPdfs, mis_weights,
                                             mis_weights_reference)
 
 

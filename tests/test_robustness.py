@@ -47,4 +47,4 @@ def test_tiny_bright_light_mixture_agrees_with_mis():
 
 def test_mixture_alpha_one_is_refused():
     with pytest.raises(ValueError, match=r"mixture_alpha: expected a number in \[0, 1\)"):
-        ps.integrators.make_integrator("pt", light_sampling="mixture", mixture_alpha=1.0)
+        ps.estimators.make_estimator("pt", light_sampling="mixture", mixture_alpha=1.0)

@@ -23,12 +23,27 @@ from __future__ import annotations
 
 import numpy as np
 
+from typing import TYPE_CHECKING
+
 from .checks import triple
 from .vecmath import dot
 
-__all__ = ["PinholeCamera", "ThinLensCamera", "FOV_AXES"]
+if TYPE_CHECKING:
+    from .fields import Fields
+
+__all__ = ["CAMERAS", "PinholeCamera", "ThinLensCamera", "FOV_AXES"]
 
 FOV_AXES = ("x", "y", "smaller", "larger")
+
+
+def _view(fields: "Fields") -> dict:
+    """The parameters every camera reads: position, look_at, up, fov, fov_axis, resolution."""
+    view = dict(position=fields.vector("position", 3), look_at=fields.vector("look_at", 3),
+                up=fields.vector("up", 3, [0.0, 1.0, 0.0]),
+                fov=fields.number("fov", low=0.0, high=180.0, low_open=True, high_open=True),
+                fov_axis=fields.string("fov_axis", "smaller", choices=FOV_AXES))
+    width, height = fields.vector("resolution", 2, integer=True, low=1)
+    return dict(view, width=int(width), height=int(height))
 
 
 class PinholeCamera:
@@ -73,6 +88,13 @@ class PinholeCamera:
             axis = "x" if self.width >= self.height else "y"
         self.tan_half = (tan_axis, tan_axis / aspect) if axis == "x" else (tan_axis * aspect, tan_axis)
         self.image_area = 4.0 * self.tan_half[0] * self.tan_half[1]
+
+    @classmethod
+    def from_fields(cls, fields: "Fields") -> "PinholeCamera":
+        """A ``[camera]`` table of type "pinhole" (see docs/scene-format.md)."""
+        view = _view(fields)
+        fields.finish()
+        return fields.build(lambda: cls(**view))
 
     def __repr__(self) -> str:
         return (f"{type(self).__name__}(position={self.position.tolist()}, look_at={self.look_at.tolist()}, "
@@ -212,6 +234,17 @@ class ThinLensCamera(PinholeCamera):
         self.lens_radius = float(aperture_radius)
         self.focus_distance = float(focus_distance)
 
+    @classmethod
+    def from_fields(cls, fields: "Fields") -> "ThinLensCamera":
+        """A ``[camera]`` table of type "thinlens": the pinhole's fields, ``aperture_radius`` and optionally
+        ``focus_distance`` (default: the distance to ``look_at``)."""
+        view = _view(fields)
+        lens = {"aperture_radius": fields.number("aperture_radius", low=0.0, low_open=True)}
+        if fields.has("focus_distance"):
+            lens["focus_distance"] = fields.number("focus_distance", low=0.0, low_open=True)
+        fields.finish()
+        return fields.build(lambda: cls(**view, **lens))
+
     def _extra_repr(self) -> str:
         return f", aperture_radius={self.lens_radius:g}, focus_distance={self.focus_distance:g}"
 
@@ -259,3 +292,6 @@ class ThinLensCamera(PinholeCamera):
             focus = lens + d * (self.focus_distance / dot(self.forward[:, None], d))
         raster, inside = super().raster(focus)
         return raster, inside & (dot(self.forward[:, None], d) > 0)
+
+
+CAMERAS = {"pinhole": PinholeCamera, "thinlens": ThinLensCamera}

@@ -17,7 +17,7 @@ from . import metrics
 from .contact_sheet import strategy_layers, write_contact_sheet
 from .driver import render
 from .imageio import read_exr, write_exr, write_png
-from .integrators import ESTIMATORS, make_integrator
+from .estimators import ESTIMATORS, make_estimator
 from .scene import SceneError, load_scene
 
 __all__ = ["main"]
@@ -118,7 +118,7 @@ def _info(args) -> int:
     print(scene.describe())
     reasons = scene.spectral_reasons()
     print(f"colour: {'spectral (' + '; '.join(reasons) + ')' if reasons else 'rgb (every colour is RGB)'}")
-    for line in make_integrator(args.estimator, **dict(args.param)).plan(scene):
+    for line in make_estimator(args.estimator, **dict(args.param)).plan(scene):
         print(f"plan: {line}")
     return 0
 

@@ -1,40 +1,41 @@
-"""The render driver: cut a render into work items, run them on threads, fill a film.
+"""``render``: a scene, an estimator and a budget in; a developed film and its statistics out.
 
-A render of ``spp`` samples per pixel is ``spp`` passes over the image.  Work
-items hold at most about ``TILE_PIXELS`` paths: a tile of a large image, or
-several passes of a small one (:func:`work_layout`); each (pass, tile) unit
-has its own random stream (see :mod:`pathspace.sampler`).  One worker thread
-per core runs the estimator over a wavefront that takes items as it needs
-them -- NumPy and Embree release the GIL in their inner loops -- and results
-are added to the film in item order, so the same seed gives the
-bit-identical image whatever the thread count.
+The driver knows no estimator: it validates the request, builds the job
+(colour mode, film, sampler source, clock) and hands it to the estimator's
+``render`` (see :mod:`pathspace.estimators.base`), which by default runs the
+passes x tiles loop.  Checkpoints develop the film during the render without
+restarting it.
 """
 from __future__ import annotations
 
 import os
-import time as _time
-import threading
+import re
 from dataclasses import dataclass, field
-from typing import Any, Iterator
+from functools import cached_property
+from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from . import _native
+from .checks import integer, number
+from .estimators import Estimator, make_estimator
+from .estimators.base import Budget, Checkpoint, RenderJob
+from .estimators.control import RenderControl
 from .film import Film
-from .integrators import WorkItem, make_integrator, work_layout
+from .sampler import SamplerSource, StreamSamplers
 from .scene import Scene, load_scene
-from .spectra import RGBMode, SpectralMode
+from .spectra import colour_mode
 
 __all__ = ["render", "RenderResult"]
 
-# Wavefront arrays are a few MB each and are allocated and freed many times a
-# bounce.  By default glibc serves such blocks with fresh mmap()s or trims the
-# heap after they are freed, so every allocation page-faults its memory back
-# in; raising the two thresholds keeps them on the heap (measured: the Cornell
+# Wavefront arrays are a few MB each and are allocated and freed many times a bounce.  By default glibc
+# serves such blocks with fresh mmap()s or trims the heap after they are freed, so every allocation
+# page-faults its memory back in; raising the two thresholds keeps them on the heap (measured: the Cornell
 # box path tracer runs ~15% faster).  Set PATHSPACE_MALLOC_TUNING=0 to opt out.
 MMAP_THRESHOLD = 32 << 20
 TRIM_THRESHOLD = 256 << 20
 _allocator_tuned = False
+_STRATEGY_LAYER = re.compile(r"s(\d+)t(\d+)\.(weighted|unweighted)")
 
 
 def _tune_allocator() -> None:
@@ -52,15 +53,13 @@ class RenderResult:
     ----------
     image : (height, width, 3) float64, the per-pixel mean in linear sRGB
     variance : (height, width, 3) float64, estimated variance of that mean
-    stats : estimator, parameters, colour mode and why, spp, seconds, samples per second, rays,
-        nonfinite (pixel samples dropped at the film for a NaN or Inf), nonfinite_contributions
-        (bidirectional estimators: connections whose value or MIS weight was NaN or Inf, dropped from
-        their sample, which itself is kept), truncated (paths cut at the safety depth), longest_subpath
-        (segments of the longest path, or subpath for bidirectional estimators), ...
+    stats : estimator, parameters, plan, colour mode and why, spp, seconds (of rendering: scene loading
+        and BVH builds excluded), samples per second, rays, nonfinite (pixel samples dropped at the film
+        for a NaN or Inf), nonfinite_contributions (bidirectional connections dropped for a NaN or Inf
+        value or weight; their sample is kept), truncated (paths cut at the safety depth),
+        longest_subpath (segments of the longest path, or subpath for bidirectional estimators), ...
     film : the film with the raw sums (RGB, or XYZ for spectral renders) for merging or further passes
     xyz : (height, width, 3) CIE XYZ of a spectral render (None for RGB renders)
-    strategies : for bidirectional renders with ``pyramid`` > 0, {(s, t): {"unweighted": image,
-        "weighted": image}} in linear sRGB: each strategy's mean contribution per pixel (None otherwise)
     """
 
     image: np.ndarray
@@ -68,10 +67,22 @@ class RenderResult:
     stats: dict[str, Any]
     film: Film = field(repr=False)
     xyz: np.ndarray | None = field(default=None, repr=False)
-    strategies: dict | None = field(default=None, repr=False)
+    to_srgb: np.ndarray | None = field(default=None, repr=False)
+
+    @cached_property
+    def strategies(self) -> dict | None:
+        """For bidirectional renders with ``pyramid`` > 0, {(s, t): {"unweighted": image, "weighted":
+        image}} in linear sRGB: each strategy's mean contribution per pixel (None otherwise)."""
+        out: dict = {}
+        for name in sorted(self.film.layers):
+            match = _STRATEGY_LAYER.fullmatch(name)
+            if match:
+                s, t, kind = int(match[1]), int(match[2]), match[3]
+                out.setdefault((s, t), {})[kind] = self.film.layer_mean(name, self.to_srgb)
+        return dict(sorted(out.items())) or None
 
     def summary(self) -> str:
-        """One line: estimator, spp, time and throughput."""
+        """One line: estimator, spp, time and throughput, and anything dropped."""
         s = self.stats
         text = (f"{s['estimator']} ({s['mode']}): {s['spp']} spp at {s['width']}x{s['height']} in {s['seconds']:.2f} s "
                 f"({s['samples_per_second'] / 1e6:.3f} M samples/s, {s['rays_per_second'] / 1e6:.2f} M rays/s, "
@@ -85,219 +96,65 @@ class RenderResult:
         return text
 
 
-def _work_items(pixel_count: int, passes: Iterator[int], tile: int, per_item: int) -> Iterator[WorkItem]:
-    """Work items over the given passes, numbered in order; see :func:`work_layout`."""
-    index = 0
-    for group in _groups(passes, per_item):
-        for start in range(0, pixel_count, tile):
-            yield WorkItem(index, range(group[0], group[-1] + 1), start // tile, start, min(start + tile, pixel_count))
-            index += 1
-
-
-def _groups(passes: Iterator[int], size: int) -> Iterator[list[int]]:
-    """Consecutive groups of ``size`` passes (the last may be shorter)."""
-    group: list[int] = []
-    for p in passes:
-        group.append(p)
-        if len(group) == size:
-            yield group
-            group = []
-    if group:
-        yield group
-
-
-def render(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int | None = None,
+def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", *, spp: int | None = None,
            time: float | None = None, seed: int = 0, threads: int | None = None, progress: bool = False,
            first_pass: int = 0, spectral: bool | None = None, wavelength_sampling: str = "uniform",
-           **params: Any) -> RenderResult:
-    """Render ``scene`` with the named estimator.
+           checkpoints: Sequence[float] = (), on_checkpoint: Callable[[Checkpoint], None] | None = None,
+           samplers: SamplerSource | None = None, **params: Any) -> RenderResult:
+    """Render ``scene`` with an estimator (a name and its ``params``, or an :class:`Estimator`).
 
-    Parameters
-    ----------
-    scene : a Scene or the path of a scene file
-    estimator : estimator name ("pt"); ``params`` are its parameters
-    spp : samples (passes) per pixel; default 16 unless ``time`` is given
-    time : a time budget in seconds instead of a sample count: passes are
-        started until it is spent (at least one pass runs)
-    seed : the seed of every random stream; the same seed gives the same image
-    threads : worker threads (default: every core this process may use)
-    progress : show a tqdm progress bar
-    first_pass : index of the first pass; renders of disjoint pass ranges with
-        the same seed are independent and their films add up (:meth:`Film.merge`)
-        to the render of the union
-    spectral : render spectrally (True), in RGB (False), or as the scene needs
-        (None: spectral when it has measured spectra or dispersion)
-    wavelength_sampling : "uniform" or "visible" (importance sampling of the
-        visible range), for spectral renders
+    ``spp`` samples (passes) per pixel (default 16), or ``time``: passes are
+    started until that many seconds have passed (at least one runs).
+    ``seed`` seeds every random stream: the same seed gives the same image.
+    ``threads``: workers (default: every core this process may use).
+    ``first_pass``: renders of disjoint pass ranges with the same seed are
+    independent and their films add up (:meth:`Film.merge`) to the render of
+    their union.  ``spectral``: render spectrally (True), in RGB (False), or
+    as the scene needs (None); ``wavelength_sampling``: "uniform" or
+    "visible".  ``on_checkpoint(Checkpoint)`` is called, with the clock
+    paused, when the render reaches each of ``checkpoints`` -- pass counts
+    with ``spp``, seconds with ``time`` -- and the film can be developed
+    there.  ``samplers``: the source of random numbers (default
+    :class:`~pathspace.sampler.StreamSamplers` of ``seed``).
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
     if spp is not None and time is not None:
         raise ValueError("give either spp or time, not both")
-    if spp is None and time is None:
-        spp = 16
-    if spp is not None and not (isinstance(spp, (int, np.integer)) and spp >= 1):
-        raise ValueError(f"spp: expected an integer >= 1, got {spp!r}")
-    if time is not None and not (np.isfinite(time) and time > 0):
-        raise ValueError(f"time: expected a number of seconds > 0, got {time!r}")
-    if not (isinstance(seed, (int, np.integer)) and seed >= 0):
-        raise ValueError(f"seed: expected an integer >= 0, got {seed!r}")
-    if not (isinstance(first_pass, (int, np.integer)) and first_pass >= 0):
-        raise ValueError(f"first_pass: expected an integer >= 0, got {first_pass!r}")
-    threads = _native.default_thread_count() if threads is None else threads
-    if not (isinstance(threads, (int, np.integer)) and threads >= 1):
-        raise ValueError(f"threads: expected an integer >= 1, got {threads!r}")
+    spp = 16 if spp is None and time is None else spp
+    spp = None if spp is None else integer(spp, "spp", low=1)
+    time = None if time is None else number(time, "time", low=0.0, low_open=True, what="a number of seconds > 0")
+    seed, first_pass = integer(seed, "seed", low=0), integer(first_pass, "first_pass", low=0)
+    threads = integer(_native.default_thread_count() if threads is None else threads, "threads", low=1)
+    checkpoints = tuple(sorted(number(c, "checkpoints", low=0.0, low_open=True) for c in checkpoints))
 
-    integrator = make_integrator(estimator, **params)
-    integrator.check(scene)
-    mode, mode_reason = _colour_mode(scene, spectral, wavelength_sampling)
+    estimator = estimator if isinstance(estimator, Estimator) else make_estimator(estimator, **params)
+    estimator.check(scene)
+    mode, mode_reason = colour_mode(scene, spectral, wavelength_sampling)
     _tune_allocator()
-    camera = scene.camera
-    film = Film(camera.width, camera.height, covariance=mode.film_covariance)
-    integrator.prepare(scene)  # build the BVHs it needs before the clock starts
-    start = _time.perf_counter()
-    deadline = None if time is None else start + time
-
-    def passes() -> Iterator[int]:
-        p = 0
-        while (spp is not None and p < spp) or (deadline is not None and (p == 0 or _time.perf_counter() < deadline)):
-            yield first_pass + p
-            p += 1
-
-    tile, per_item = work_layout(camera.pixel_count, spp, threads, integrator.tile_pixels)
-    last_tile = -(-camera.pixel_count // tile) - 1
-    items = _work_items(camera.pixel_count, passes(), tile, per_item)
-    lock = threading.Lock()
-
-    def next_item() -> WorkItem | None:
-        with lock:
-            return None if failures else next(items, None)
-
-    # Each worker runs the estimator on its own wavefront, taking items as it needs them; results are added
-    # to the film in item order, pass by pass, so the sums come out the same whatever the thread count.
-    done = threading.Condition()
-    results: dict[int, tuple] = {}
-    failures: list[BaseException] = []
-    counters = [{"rays": 0, "truncated": 0, "longest": 0, "nonfinite_contributions": 0} for _ in range(threads)]
-    running = [threads]
-
-    def work(k: int) -> None:
-        try:
-            for result in integrator.render_stream(scene, next_item, seed, mode, counters[k]):
-                with done:
-                    results[result[0].index] = result
-                    done.notify()
-        except BaseException as error:  # handed to the main thread
-            failures.append(error)
-        finally:
-            with done:
-                running[0] -= 1
-                done.notify()
-
-    bar = _progress_bar(progress, spp, estimator)
-    workers = [threading.Thread(target=work, args=(k,), daemon=True) for k in range(threads)]
-    for w in workers:
-        w.start()
-    done_passes = expected = 0
-    pass_image = None      # a pass with splats, gathered tile by tile until its last tile is in
-    strategy_sums: dict = {}
-    while True:
-        with done:
-            while expected not in results and running[0] and not failures:
-                done.wait()
-            if failures:
-                break
-            if expected not in results:
-                break
-            item, values, splats, strategies = results.pop(expected)
-        expected += 1
-        width = item.pixel_stop - item.pixel_start
-        for k in range(len(item.passes)):
-            if splats is None:
-                film.add_tile(item.pixel_start, values[:, k * width:(k + 1) * width])
-                continue
-            # A pass with splats is one sample of every pixel only once all its tiles are in.
-            if pass_image is None:
-                pass_image = np.zeros((3, camera.pixel_count))
-            pass_image[:, item.pixel_start:item.pixel_stop] += values[:, k * width:(k + 1) * width]
-            pass_image += splats[k]
-            if item.tile == last_tile:
-                film.add_tile(0, pass_image)
-                pass_image = None
-        for key, sums in (strategies or {}).items():
-            if key in strategy_sums:
-                strategy_sums[key] += sums
-            else:
-                strategy_sums[key] = sums
-        if item.tile == last_tile:
-            done_passes += len(item.passes)
-            if bar is not None:
-                bar.update(len(item.passes))
-    for w in workers:
-        w.join()
-    if bar is not None:
-        bar.close()
-    if failures:
-        raise failures[0]
-    rays = sum(c["rays"] for c in counters)
-    truncated = sum(c["truncated"] for c in counters)
-    seconds = _time.perf_counter() - start
-    samples = int(film.count.sum())
-    stats = {
-        "estimator": estimator,
-        "params": {k: v for k, v in vars(integrator).items() if not k.startswith("_") and k != "roulette"},
-        "plan": integrator.plan(scene),
-        "spp": done_passes,
-        "seed": int(seed),
-        "first_pass": int(first_pass),
-        "threads": int(threads),
-        "width": camera.width,
-        "height": camera.height,
-        "seconds": seconds,
-        "samples": samples,
-        "samples_per_second": samples / seconds,
-        "rays": rays,
-        "rays_per_second": rays / seconds,
-        "mode": mode.name,
-        "mode_reason": mode_reason,
-        "nonfinite": film.nonfinite,
-        "nonfinite_contributions": sum(c["nonfinite_contributions"] for c in counters),
-        "truncated": truncated,
-        "longest_subpath": max(c["longest"] for c in counters),
-        "scene": scene.source,
-    }
+    film = Film(scene.camera.width, scene.camera.height, covariance=mode.film_covariance)
+    estimator.prepare(scene)  # build the BVHs it needs before the clock starts
+    job = RenderJob(scene, mode, samplers or StreamSamplers(seed), film, threads, RenderControl(),
+                    progress=_progress_bar(progress, spp, estimator.name))
+    budget = Budget(spp, time, first_pass, checkpoints, "spp" if spp is not None else "seconds")
+    job.control.start()
+    try:
+        estimator.render(job, budget, on_checkpoint)
+    finally:
+        if job.progress is not None:
+            job.progress.close()
+    seconds = job.control.elapsed()
+    samples, counters = int(film.count.sum()), job.counters
+    stats = {"estimator": estimator.name, "params": estimator.params, "plan": estimator.plan(scene),
+             "spp": film.passes, "seed": seed, "first_pass": first_pass, "threads": threads,
+             "width": film.width, "height": film.height, "seconds": seconds, "samples": samples,
+             "samples_per_second": samples / seconds, "rays": counters.rays, "rays_per_second": counters.rays / seconds,
+             "mode": mode.name, "mode_reason": mode_reason, "nonfinite": film.nonfinite,
+             "nonfinite_contributions": counters.nonfinite_contributions, "truncated": counters.truncated,
+             "longest_subpath": counters.longest, "scene": scene.source, **job.stats}
     matrix = mode.film_to_srgb
     return RenderResult(image=film.mean(matrix), variance=film.variance(matrix), stats=stats, film=film,
-                        xyz=film.mean() if mode.name == "spectral" else None,
-                        strategies=_strategy_images(strategy_sums, done_passes, camera, matrix)
-                        if strategy_sums else None)
-
-
-def _strategy_images(sums: dict, passes: int, camera, matrix) -> dict:
-    """Per-strategy mean images (linear sRGB) from per-strategy sums over ``passes`` passes."""
-    out = {}
-    for key in sorted(sums):
-        images = {}
-        for k, name in enumerate(("unweighted", "weighted")):
-            mean = sums[key][k] / max(passes, 1)
-            if matrix is not None:
-                mean = matrix @ mean
-            images[name] = mean.T.reshape(camera.height, camera.width, 3)
-        out[key] = images
-    return out
-
-
-def _colour_mode(scene: Scene, spectral: bool | None, wavelength_sampling: str):
-    """The colour mode of a render and the reason for it."""
-    reasons = scene.spectral_reasons()
-    if spectral is None:
-        spectral = bool(reasons)
-        reason = "; ".join(reasons) if reasons else "every colour in the scene is RGB and nothing disperses"
-    else:
-        reason = "asked for" + (f" (the scene: {'; '.join(reasons)})" if reasons else "")
-        if reasons and not spectral:
-            reason += ": spectra are reduced to RGB, dispersion uses the index at 550 nm"
-    return (SpectralMode(wavelength_sampling) if spectral else RGBMode()), reason
+                        xyz=film.mean() if mode.name == "spectral" else None, to_srgb=matrix)
 
 
 def _progress_bar(enabled: bool, total: int | None, estimator: str):

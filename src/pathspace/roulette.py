@@ -1,23 +1,37 @@
-"""Russian roulette: unbiased termination of paths (Arvo & Kirk 1990; Veach 1997, sec. 2.4).
+"""Russian roulette: unbiased termination of random walks (Arvo & Kirk 1990; Veach 1997, sec. 2.4).
 
-At each scattering vertex from depth ``start_depth`` on, a path survives with
-probability q and its throughput is divided by q, so the estimator stays
-unbiased for any q in (0, 1].  Policies:
+Every estimator takes the same four parameters, and every name means one
+thing.  At a scattering vertex reached after ``rr_depth`` or more segments
+(the camera ray is segment 1; on a light subpath, the ray leaving the light),
+a walk survives with probability q and its throughput is divided by q, so
+the estimate stays unbiased for any q in (0, 1].  Policies (``rr``):
 
-``"off"``         q = 1: paths end only by escaping, absorption or ``max_depth``.
-``"fixed"``       q = 1 - ``probability`` (a fixed termination probability).
-``"albedo"``      q = the scattering vertex's albedo estimate (the largest
-                  channel of the sampled BSDF weight f cos / pdf), capped at 1.
-``"throughput"``  q = min(largest channel of the path throughput, ``cap``): paths
-                  carrying little energy end early, and a surviving path's
-                  throughput is lifted back toward 1.  The default, with cap 1
-                  as in pbrt-v4.  Mitsuba 3 caps at 0.95, which gives an
-                  estimator of infinite variance wherever the albedo exceeds
-                  the cap (throughput then grows by albedo / cap per bounce):
-                  in an albedo-0.99 furnace its finite-sample means fall ~10%
-                  short.
+``"off"``         q = 1: walks end only by escaping, absorption or ``max_depth``.
+``"fixed"``       q = 1 - ``rr_probability`` (a fixed termination probability).
+``"albedo"``      q = the albedo of the vertex's material (the largest channel
+                  of its reflectance; lossless specular materials -- mirrors,
+                  glass -- at most 0.9, so that walks trapped in glass by total
+                  internal reflection end: the weight grows by 1/0.9 per bounce
+                  and the variance stays finite while a walk leaves the glass
+                  with probability > 0.1).  Termination probability 1 - albedo.
+``"throughput"``  q = min(largest channel of the walk's throughput after this
+                  vertex, ``rr_cap``): walks carrying little energy end early
+                  and a survivor's throughput is lifted back toward 1 (pbrt-v4's
+                  rule, cap 1).  A light subpath's throughput is measured
+                  relative to the ray leaving the light, so that the choice does
+                  not depend on the light's units.  Mitsuba 3 caps at 0.95,
+                  which gives infinite variance wherever the albedo exceeds the
+                  cap (throughput then grows by albedo / cap per bounce): in an
+                  albedo-0.99 furnace its finite-sample means fall ~10% short.
 
-Depth counts path segments: the camera ray is segment 1.
+"off", "fixed" and "albedo" are *local*: q depends only on the vertex's
+material and depth, the same whichever direction a walk passes the vertex,
+so bidirectional estimators include q in the vertex densities that their
+MIS weights compare (as SmallVCM does).  "throughput" depends on the walk
+that reached the vertex, which the opposite walk cannot know; bidirectional
+estimators then leave q out of the MIS densities (the weights stay a
+partition of unity over the strategies, so the estimate stays unbiased; they
+are no longer exactly the heuristic of the true densities).
 """
 from __future__ import annotations
 
@@ -25,14 +39,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["RussianRoulette", "POLICIES"]
+from .checks import choice, integer, number
+
+__all__ = ["RussianRoulette", "POLICIES", "SPECULAR_CONTINUATION"]
 
 POLICIES = ("off", "fixed", "albedo", "throughput")
+# The largest survival probability "albedo" gives lossless specular (delta) materials.
+SPECULAR_CONTINUATION = 0.9
 
 
 @dataclass(frozen=True)
 class RussianRoulette:
-    """A roulette policy; see the module docstring."""
+    """A roulette policy (parameters ``rr``, ``rr_depth``, ``rr_probability``, ``rr_cap``); see the module."""
 
     policy: str = "throughput"
     start_depth: int = 5
@@ -40,37 +58,40 @@ class RussianRoulette:
     cap: float = 1.0
 
     def __post_init__(self) -> None:
-        if self.policy not in POLICIES:
-            raise ValueError(f"rr: expected one of {POLICIES}, got {self.policy!r}")
-        if not (isinstance(self.start_depth, (int, np.integer)) and self.start_depth >= 1):
-            raise ValueError(f"rr_depth: expected an integer >= 1, got {self.start_depth!r}")
-        if not (isinstance(self.probability, (int, float)) and 0.0 <= self.probability < 1.0):
-            raise ValueError(f"rr_probability: expected a termination probability in [0, 1), got {self.probability!r}")
-        if not (isinstance(self.cap, (int, float)) and 0.0 < self.cap <= 1.0):
-            raise ValueError(f"rr_cap: expected a survival cap in (0, 1], got {self.cap!r}")
+        choice(self.policy, "rr", POLICIES)
+        integer(self.start_depth, "rr_depth", low=1)
+        number(self.probability, "rr_probability", low=0.0, high=1.0, high_open=True,
+               what="a termination probability in [0, 1)")
+        number(self.cap, "rr_cap", low=0.0, high=1.0, low_open=True, what="a survival cap in (0, 1]")
+
+    @property
+    def local(self) -> bool:
+        """Whether q depends only on the vertex (its material and depth), not on the walk that reached it."""
+        return self.policy != "throughput"
 
     def describe(self) -> str:
         """The policy in words."""
         if self.policy == "off":
             return "no Russian roulette"
         rule = {"fixed": f"termination probability {self.probability:g}",
-                "albedo": "survival probability = albedo",
+                "albedo": "survival probability = material albedo",
                 "throughput": f"survival probability = max throughput, capped at {self.cap:g}"}[self.policy]
         return f"Russian roulette from depth {self.start_depth}: {rule}"
 
-    def survival(self, depth: np.ndarray, throughput: np.ndarray, albedo: np.ndarray) -> np.ndarray | None:
-        """Survival probabilities (N,) of paths whose next segment would be ``depth + 1``, or None (all survive).
+    def survival(self, depth: np.ndarray, throughput: np.ndarray | None, albedo: np.ndarray) -> np.ndarray | None:
+        """Survival probabilities (N,) at vertices reached after ``depth`` (N,) segments, or None (all survive).
 
-        ``depth`` (N,) counts each path's segments so far, ``throughput`` (C, N)
-        is the path throughput including this vertex's sample weight, ``albedo``
-        (C, N) that sample weight.
+        ``throughput`` (C, N) is the walk's throughput including this
+        vertex's sample weight (read by "throughput" only; None otherwise
+        allowed); ``albedo`` (N,) the albedo of each vertex's material
+        (see :attr:`pathspace.bsdfs.MaterialTable.albedo`).
         """
         if self.policy == "off" or depth.max(initial=0) < self.start_depth:
             return None
         if self.policy == "fixed":
-            q = np.full(throughput.shape[1], 1.0 - self.probability)
+            q = np.full(depth.shape, 1.0 - self.probability)
         elif self.policy == "albedo":
-            q = np.clip(albedo.max(axis=0), 0.0, 1.0)
+            q = np.clip(albedo, 0.0, 1.0)
         else:
             q = np.clip(throughput.max(axis=0), 0.0, self.cap)
         return np.where(depth >= self.start_depth, q, 1.0)

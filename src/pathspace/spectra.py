@@ -38,7 +38,7 @@ __all__ = [
     "LAMBDA_MIN", "LAMBDA_MAX", "GRID", "SampledSpectrum", "Blackbody", "Illuminant", "Colour", "ColourTable",
     "Cauchy", "Sellmeier", "check_colour", "check_emission", "mean_rgb", "is_spectral", "cmfs", "xyz_to_srgb_matrix", "spectrum_to_xyz", "sample_wavelengths",
     "WAVELENGTH_SAMPLING", "WAVELENGTHS_PER_PATH", "SpectralColours", "RGBColours", "RGBMode", "SpectralMode",
-    "radiance_to_xyz", "grid_position", "wavelength_pdf",
+    "radiance_to_xyz", "grid_position", "wavelength_pdf", "colour_mode",
 ]
 
 LAMBDA_MIN, LAMBDA_MAX = 360.0, 830.0
@@ -482,3 +482,17 @@ class SpectralMode:
     def to_film(self, radiance: np.ndarray, paths, lanes: np.ndarray) -> np.ndarray:
         return radiance_to_xyz(radiance, *(np.take(a, lanes, axis=1) for a in (
             paths.wavelength_index, paths.wavelength_frac, paths.wavelength_pdf)))
+
+
+def colour_mode(scene, spectral: bool | None, wavelength_sampling: str = "uniform"):
+    """The colour mode of a render of ``scene`` (RGBMode or SpectralMode) and the reason for it:
+    ``spectral`` True or False forces it; None renders spectrally when the scene needs it."""
+    reasons = scene.spectral_reasons()
+    if spectral is None:
+        spectral = bool(reasons)
+        reason = "; ".join(reasons) if reasons else "every colour in the scene is RGB and nothing disperses"
+    else:
+        reason = "asked for" + (f" (the scene: {'; '.join(reasons)})" if reasons else "")
+        if reasons and not spectral:
+            reason += ": spectra are reduced to RGB, dispersion uses the index at 550 nm"
+    return (SpectralMode(wavelength_sampling) if spectral else RGBMode()), reason

@@ -7,8 +7,12 @@ glass, delta), :class:`Conductor` (rough GGX metal).  See
 """
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 
+from ..roulette import SPECULAR_CONTINUATION
+from ..spectra import is_spectral
 from .base import MODES, BSDFSample, Surface
 from .conductor import Conductor
 from .diffuse import SAMPLING as DIFFUSE_SAMPLING
@@ -36,6 +40,9 @@ class MaterialTable:
     tables : per kind, the parameter tables of its materials
     delta : (M,) bool, whether a material only has delta lobes
     delta_names : the names of those materials
+    albedo : (M,) float64, the largest fraction of light each material reflects (Russian roulette's
+        "albedo" policy; see :mod:`pathspace.roulette`), lossless delta materials capped at
+        ``SPECULAR_CONTINUATION``
     """
 
     def __init__(self, names: list[str], materials: list) -> None:
@@ -59,9 +66,20 @@ class MaterialTable:
         self.tables = [model.tables(group) for model, group in zip(self.kinds, members)]
         self.delta = np.array([type(m).delta for m in materials], dtype=bool)
         self.delta_names = [name for name, delta in zip(self.names, self.delta) if delta]
+        self.albedo = np.array([min(m.albedo, SPECULAR_CONTINUATION) if m.delta else m.albedo for m in materials])
 
     def __len__(self) -> int:
         return len(self.materials)
+
+    def spectral_reasons(self) -> list[str]:
+        """Why the materials need spectral rendering (empty: RGB suffices)."""
+        reasons = []
+        for name, material in zip(self.names, self.materials):
+            if getattr(material, "dispersive", False):
+                reasons.append(f"material {name!r} is dispersive")
+            elif any(is_spectral(getattr(material, f.name)) for f in dataclasses.fields(material)):
+                reasons.append(f"material {name!r} has spectral data")
+        return reasons
 
     def __repr__(self) -> str:
         return "MaterialTable(" + ", ".join(f"{n}={m}" for n, m in zip(self.names, self.materials)) + ")"

@@ -48,6 +48,15 @@ class Conductor:
             raise ValueError(f"alpha: expected a GGX roughness in [{ALPHA_RANGE[0]:g}, {ALPHA_RANGE[1]:g}], "
                              f"got {self.alpha!r}")
 
+    @classmethod
+    def from_fields(cls, fields) -> "Conductor":
+        """A material table of type "conductor": ``eta``, ``k``, ``alpha``."""
+        args = fields.colour("eta"), fields.colour("k"), fields.number("alpha")
+        fields.finish()
+        return fields.build(lambda: cls(*args))
+
+    albedo = 1.0  # a bound: a conductor reflects up to all light at grazing angles
+
     @staticmethod
     def tables(materials: list["Conductor"]) -> dict:
         return {"eta": ColourTable([m.eta for m in materials], "unbounded"),

@@ -48,12 +48,21 @@ class Dielectric:
     ior: Index = 1.5
     kind = "dielectric"
     delta = True
+    albedo = 1.0  # lossless: what is not reflected is transmitted
 
     def __post_init__(self) -> None:
         if isinstance(self.ior, (Cauchy, Sellmeier)):
             return
         if not (isinstance(self.ior, (int, float)) and np.isfinite(self.ior) and self.ior > 0):
             raise ValueError(f"ior: expected a number > 0 or a dispersion law, got {self.ior!r}")
+
+    @classmethod
+    def from_fields(cls, fields) -> "Dielectric":
+        """A material table of type "dielectric": ``ior``, a number > 0 (default 1.5) or a dispersion law,
+        ``{ cauchy = [a, b] }`` or ``{ sellmeier = { b = [...], c = [...] } }``."""
+        ior = _ior(fields)
+        fields.finish()
+        return fields.build(lambda: cls(ior))
 
     @property
     def dispersive(self) -> bool:
@@ -110,3 +119,23 @@ class Dielectric:
             weight[1:] *= ~params.dispersive
             terminated = params.dispersive
         return BSDFSample(wi.astype(np.float32), weight, pdf, np.ones(count, dtype=bool), terminated)
+
+
+def _ior(fields) -> Index:
+    value = fields.raw("ior", 1.5)
+    if not isinstance(value, dict):
+        return fields.number("ior", 1.5, low=0.0, low_open=True)
+    law = fields.sub("ior")
+    if not (law.has("cauchy") or law.has("sellmeier")):
+        raise fields.error("expected a number > 0 or a dispersion law: { cauchy = [a, b] } or "
+                           "{ sellmeier = { b = [...], c = [...] } }", "ior")
+    if law.has("cauchy"):
+        a, b = law.vector("cauchy", 2)
+        result = law.build(lambda: Cauchy(float(a), float(b)))
+    else:
+        sellmeier = law.sub("sellmeier")
+        b, c = sellmeier.vector("b", 3), sellmeier.vector("c", 3)
+        sellmeier.finish()
+        result = law.build(lambda: Sellmeier(tuple(b), tuple(c)))
+    law.finish()
+    return result

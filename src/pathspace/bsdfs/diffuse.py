@@ -39,6 +39,18 @@ class Diffuse:
     def __post_init__(self) -> None:
         object.__setattr__(self, "reflectance", check_colour(self.reflectance, "reflectance", "reflectance"))
 
+    @classmethod
+    def from_fields(cls, fields) -> "Diffuse":
+        """A material table of type "diffuse": ``reflectance``."""
+        reflectance = fields.colour("reflectance")
+        fields.finish()
+        return fields.build(lambda: cls(reflectance))
+
+    @property
+    def albedo(self) -> float:
+        """Largest fraction of light it reflects (the largest channel of its reflectance)."""
+        return float(ColourTable([self.reflectance], "reflectance").rgb.max())
+
     @staticmethod
     def tables(materials: list["Diffuse"]) -> dict:
         """Parameter tables over the given materials."""

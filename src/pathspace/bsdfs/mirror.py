@@ -31,6 +31,18 @@ class Mirror:
     def __post_init__(self) -> None:
         object.__setattr__(self, "reflectance", check_colour(self.reflectance, "reflectance", "reflectance"))
 
+    @classmethod
+    def from_fields(cls, fields) -> "Mirror":
+        """A material table of type "mirror": ``reflectance`` (default white)."""
+        reflectance = fields.colour("reflectance", [1.0, 1.0, 1.0])
+        fields.finish()
+        return fields.build(lambda: cls(reflectance))
+
+    @property
+    def albedo(self) -> float:
+        """Largest fraction of light it reflects (the largest channel of its reflectance)."""
+        return float(ColourTable([self.reflectance], "reflectance").rgb.max())
+
     @staticmethod
     def tables(materials: list["Mirror"]) -> dict:
         return {"reflectance": ColourTable([m.reflectance for m in materials], "reflectance")}

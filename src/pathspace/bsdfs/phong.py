@@ -54,6 +54,20 @@ class Phong:
         if not (np.isfinite(self.exponent) and self.exponent >= 0):
             raise ValueError(f"exponent: expected a number >= 0, got {self.exponent!r}")
 
+    @classmethod
+    def from_fields(cls, fields) -> "Phong":
+        """A material table of type "phong": ``diffuse``, ``specular``, ``exponent``."""
+        args = fields.colour("diffuse"), fields.colour("specular"), fields.number("exponent", low=0.0)
+        fields.finish()
+        return fields.build(lambda: cls(*args))
+
+    @property
+    def albedo(self) -> float:
+        """Largest fraction of light it reflects (the largest channel of diffuse + specular, at most 1)."""
+        kd = ColourTable([self.diffuse], "reflectance").rgb[:, 0]
+        ks = ColourTable([self.specular], "reflectance").rgb[:, 0]
+        return min(1.0, float((kd + ks).max()))
+
     @staticmethod
     def tables(materials: list["Phong"]) -> dict:
         kd = ColourTable([m.diffuse for m in materials], "reflectance")

@@ -1,46 +1,133 @@
-"""Area lights: emitting triangles of the scene mesh.
+"""Area lights: the triangles of a shape, emitting constant radiance.
 
-Each emitting triangle has the constant radiance Le of its light (an emitting
-shape) on the side of its geometric normal (one-sided, the default) or on
-both sides.  Given a triangle, a point
-is sampled either uniformly by area, with solid-angle density at a receiver
+Each emitting triangle has the constant radiance Le of its light on the side
+of its geometric normal (one-sided, the default) or on both sides.  Every
+emitting triangle is a light of its own for light selection.  Given a
+triangle, a point is sampled either uniformly by area, with solid-angle
+density at a receiver
 
     p_sa = (1 / area) * dist^2 / |cos theta_light|          (Veach 1997, eq. 8.10)
 
 or uniformly over the solid angle the triangle subtends (Arvo 1995), density
 1 / Omega, where that is well conditioned (as in pbrt-v4: 3e-4 < Omega <
 6.22 sr; outside it, area sampling is used, and the densities say so).
+Emitted rays leave a uniform point in a cosine-weighted direction (either
+side of two-sided lights, chosen with probability 1/2).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..spectra import ColourTable
-from ..vecmath import dot
+from .. import warp
+from ..spectra import Colour, ColourTable, check_emission
+from ..vecmath import dot, leave_distance
 from ..warp import square_to_uniform_triangle
+from .base import EmissionSample, Light, LightContext, LightSample
 from .spherical_triangle import sample_spherical_triangle, solid_angle
 
 if TYPE_CHECKING:
+    from ..fields import Fields
     from ..scene.mesh import TriangleMesh
 
-__all__ = ["AreaLights", "MEASURES"]
+__all__ = ["AreaLight", "AreaTables", "MEASURES"]
 
 MEASURES = ("area", "solid_angle")
 SOLID_ANGLE_RANGE = (3e-4, 6.22)
 
 
-class AreaLights:
-    """The emitting triangles of a scene.
+@dataclass(frozen=True, eq=False)
+class AreaLight(Light):
+    """The triangles ``triangles`` (indices into the scene mesh) of a shape, emitting ``radiance``
+    (W sr^-1 m^-2, RGB or a spectrum) on the side of their normals, or on both if ``two_sided``."""
 
-    Parameters
-    ----------
-    mesh : the scene mesh
-    triangles : (E,) indices of emitting triangles
-    light_of : (E,) index of the light (emitting shape) each triangle belongs to
-    radiance : the radiance of each light (W sr^-1 m^-2, RGB or spectral), a ColourTable of "illuminant" kind
-    two_sided : (L,) whether each light emits on both sides
+    radiance: Colour
+    two_sided: bool = False
+    triangles: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    kind = "area"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "radiance", check_emission(self.radiance, "radiance"))
+        object.__setattr__(self, "triangles", np.asarray(self.triangles, dtype=np.int64).reshape(-1))
+
+    @classmethod
+    def from_fields(cls, fields: "Fields") -> "AreaLight":
+        """An ``emitter`` table of a shape: ``radiance``, ``two_sided`` (its triangles are set by the loader)."""
+        radiance = fields.colour("radiance")
+        two_sided = fields.boolean("two_sided", False)
+        fields.finish()
+        return fields.build(lambda: cls(radiance, two_sided))
+
+    def on(self, triangles: np.ndarray) -> "AreaLight":
+        """The same emitter on the given mesh triangles."""
+        return replace(self, triangles=triangles)
+
+    @staticmethod
+    def tables(lights: list["AreaLight"], context: LightContext) -> "AreaTables":
+        """Per-triangle tables of all area lights of a scene."""
+        triangles = [light.triangles for light in lights]
+        light_of = [np.full(t.size, j) for j, t in enumerate(triangles)]
+        return AreaTables(context.mesh, np.concatenate(triangles or [np.zeros(0, np.int64)]),
+                          np.concatenate(light_of or [np.zeros(0, np.int64)]),
+                          ColourTable([light.radiance for light in lights], "illuminant"),
+                          np.array([light.two_sided for light in lights], dtype=bool))
+
+    @staticmethod
+    def power(tables: "AreaTables", context: LightContext) -> np.ndarray:
+        """Emitted power of every emitting triangle."""
+        return tables.power
+
+    @staticmethod
+    def sample_li(tables: "AreaTables", idx, receivers, u, colours, measure: str) -> LightSample:
+        """Points on the triangles ``idx`` for receivers (3, N), by area or by solid angle."""
+        point, normal, wi, distance, cos_light, pdf = tables.sample(idx, receivers, u, measure)
+        facing = tables.two_sided.take(idx) | (cos_light > 0)
+        return LightSample(wi, distance, point, normal, tables.radiance_of(idx, colours), facing, pdf,
+                           np.zeros(pdf.shape, dtype=bool), cos_light, tables.table[12].take(idx))
+
+    @staticmethod
+    def pdf_li(tables: "AreaTables", idx, receivers, points, measure: str) -> np.ndarray:
+        """Solid-angle density of finding ``points`` on triangles ``idx`` by :meth:`sample_li`."""
+        return tables.pdf_sa(idx, receivers, points, measure)
+
+    @staticmethod
+    def sample_le(tables: "AreaTables", idx, u, colours, context: LightContext) -> EmissionSample:
+        """A uniform point and a cosine-weighted direction (on either side of two-sided lights)."""
+        rows, p = tables.uniform_points(idx, u[0:2])
+        n = rows[9:12]
+        two = tables.two_sided.take(idx)
+        side = np.where(two & (u[2] < 0.5), np.float32(-1), np.float32(1))
+        u_side = np.where(two, (u[2] * 2) % 1.0, u[2])  # reused after choosing a side
+        d = warp.square_to_cosine_about(n * side, np.stack((u_side, u[3])))
+        cos = np.abs(dot(n, d)).astype(np.float64)
+        return EmissionSample(point=p, tmin=leave_distance(rows[12], dot(n, d)), epsilon=rows[12], normal=n,
+                              direction=d, value=tables.radiance_of(idx, colours),
+                              pdf_pos=1.0 / tables.area.take(idx), pdf_dir=cos * warp.INV_PI * np.where(two, 0.5, 1.0),
+                              cos_light=cos)
+
+    @staticmethod
+    def pdf_le(tables: "AreaTables", idx, normal, direction, context: LightContext):
+        """(1 / area, cosine-weighted density of ``direction``)."""
+        cos = dot(normal, direction).astype(np.float64)
+        two = tables.two_sided.take(idx)
+        return 1.0 / tables.area.take(idx), np.where(two, np.abs(cos) * 0.5, np.maximum(cos, 0.0)) * warp.INV_PI
+
+    @staticmethod
+    def le(tables: "AreaTables", idx, normal, direction, colours) -> np.ndarray:
+        """Radiance toward ``direction`` (0 behind one-sided lights)."""
+        return tables.emitted(idx, dot(normal, direction), colours)
+
+
+class AreaTables:
+    """The emitting triangles of a scene and their per-triangle tables.
+
+    ``triangles`` (E,) mesh indices of the emitting triangles; ``light_of``
+    (E,) the area light each belongs to; ``radiance`` a ColourTable of the
+    lights' radiance; ``two_sided`` (E,); ``area`` (E,); ``table`` the
+    mesh's geometry rows of the emitting triangles; ``emitter_of_triangle``
+    (F,) the emitting-triangle index of every mesh triangle, or -1.
     """
 
     def __init__(self, mesh: "TriangleMesh", triangles: np.ndarray, light_of: np.ndarray, radiance: ColourTable,
@@ -76,8 +163,7 @@ class AreaLights:
     def sample(self, emitter: np.ndarray, receivers: np.ndarray, u: np.ndarray, measure: str):
         """Points on triangles ``emitter`` for receivers (3, N): (point, normal, wi, distance, cos_light, pdf_sa).
 
-        ``pdf_sa`` is the solid-angle density at the receiver given the triangle
-        (the selection probability is not included).
+        ``pdf_sa`` is the solid-angle density at the receiver given the triangle.
         """
         rows, point = self.uniform_points(emitter, u)
         normal = rows[9:12]
@@ -111,7 +197,7 @@ class AreaLights:
         return point, np.where(use, omega, 0.0)
 
     def pdf_sa(self, emitter: np.ndarray, receivers: np.ndarray, points: np.ndarray, measure: str) -> np.ndarray:
-        """Solid-angle density with which :meth:`sample` picks ``points`` on triangles ``emitter`` (given the triangle)."""
+        """Solid-angle density with which :meth:`sample` picks ``points`` on triangles ``emitter``."""
         rows = np.take(self.table, emitter, axis=1)
         to_point = points - receivers
         dist2 = dot(to_point, to_point).astype(np.float64)

@@ -1,5 +1,5 @@
 """Scenes: the format-independent scene model and its TOML front end."""
-from .errors import SceneError
+from ..fields import SceneError
 from .mesh import TriangleMesh
 from .model import Scene
 from .toml_loader import load_scene, scene_from_dict

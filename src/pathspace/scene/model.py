@@ -49,20 +49,7 @@ class Scene:
 
     def spectral_reasons(self) -> list[str]:
         """Why this scene needs spectral rendering (empty: RGB suffices)."""
-        from ..bsdfs import Dielectric
-        from ..spectra import is_spectral
-
-        reasons = []
-        for name, material in zip(self.materials.names, self.materials.materials):
-            if isinstance(material, Dielectric) and material.dispersive:
-                reasons.append(f"material {name!r} is dispersive")
-            elif any(is_spectral(v) for v in vars(material).values()):
-                reasons.append(f"material {name!r} has spectral data")
-        if self.lights.area.radiance.spectral:
-            reasons.append("an area light emits a spectrum")
-        if any(is_spectral(v) for light in self.lights.others for v in vars(light).values()):
-            reasons.append("a light emits a spectrum")
-        return reasons
+        return self.materials.spectral_reasons() + self.lights.spectral_reasons()
 
     def describe(self) -> str:
         """A short human-readable summary."""

@@ -1,7 +1,12 @@
 """The TOML scene format (one front end of the scene model).
 
-The format is documented in ``docs/scene-format.md``.  Every error names the
-file, the field and what was expected; see :mod:`pathspace.scene.fields`.
+The format is documented in ``docs/scene-format.md``.  The loader reads the
+structure -- camera, materials, shapes (with their emitters and transforms),
+lights -- and hands each table to the model its ``type`` names (the
+registries :data:`pathspace.camera.CAMERAS`, :data:`pathspace.bsdfs.KINDS`,
+:data:`pathspace.scene.shapes.SHAPES`, :data:`pathspace.lights.LIGHTS`),
+which reads and validates its own fields.  Every error names the file, the
+field and what was expected; see :mod:`pathspace.fields`.
 """
 from __future__ import annotations
 
@@ -11,36 +16,28 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import trimesh
 
 from ..bsdfs import KINDS, MaterialTable
-from ..camera import FOV_AXES, PinholeCamera, ThinLensCamera
-from ..lights import AreaLights, DirectionalLight, Environment, LightSet, PointLight, SpotLight
-from ..spectra import Blackbody, Cauchy, Colour, ColourTable, Illuminant, SampledSpectrum, Sellmeier, check_emission
+from ..camera import CAMERAS
+from ..fields import Fields, SceneError
+from ..lights import LIGHTS, AreaLight, LightSet
 from . import shapes as builtin
-from .errors import SceneError
-from .fields import Fields
 from .mesh import TriangleMesh, triangle_cross
 from .model import Scene
+from .shapes import SHAPES
 
 __all__ = ["load_scene", "scene_from_dict", "FORMAT_VERSION"]
 
 FORMAT_VERSION = 1
-SHAPE_TYPES = ("triangles", "mesh", "quad", "box", "sphere")
-MATERIAL_TYPES = ("diffuse", "phong", "mirror", "dielectric", "conductor")
-CAMERA_TYPES = ("pinhole", "thinlens")
-LIGHT_TYPES = ("point", "spot", "directional", "environment")
 # A triangle is degenerate when |(p1-p0) x (p2-p0)| <= DEGENERATE_RELATIVE * (longest edge)^2,
 # i.e. its vertices are collinear to within float rounding.
 DEGENERATE_RELATIVE = 1e-10
-# An icosphere of 8 subdivisions has 1.3 million triangles; beyond that memory runs out quickly.
-MAX_SUBDIVISIONS = 8
 # Geometry is traced in float32: coordinates must stay well inside its range.
 MAX_COORDINATE = 1e30
 
 
 def load_scene(path: str | os.PathLike) -> Scene:
-    """Load a scene from a TOML file; mesh files are found relative to its folder."""
+    """Load a scene from a TOML file; mesh and spectrum files are found relative to its folder."""
     path = Path(path)
     if not path.is_file():
         raise SceneError(f"{path}: scene file not found")
@@ -53,234 +50,84 @@ def load_scene(path: str | os.PathLike) -> Scene:
     return scene_from_dict(data, source=str(path), base_dir=path.parent)
 
 
+def _model(fields: Fields, registry: dict, default: str | None = None):
+    """The model the table's ``type`` names, read from the table by the model itself."""
+    kind = fields.string("type", default if default is not None else Fields.REQUIRED, choices=registry)
+    return registry[kind].from_fields(fields)
+
+
 def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>",
                     base_dir: str | os.PathLike | None = None) -> Scene:
     """Build a scene from the parsed contents of a scene file (a dict of the TOML structure)."""
-    top = Fields(data, "", source)
+    top = Fields(data, "", source, base_dir)
     version = top.integer("format", FORMAT_VERSION, low=1)
     if version != FORMAT_VERSION:
         raise top.error(f"this pathspace reads scene format {FORMAT_VERSION}, got {version}", "format")
     top.string("name", "")
     top.string("description", "")
-    base = Path(base_dir) if base_dir is not None else Path.cwd()
-    camera = _camera(top.sub("camera"))
-    material_names, materials = _materials(top.sub("materials"), base)
+    camera = _model(top.sub("camera"), CAMERAS, "pinhole")
+    materials = top.sub("materials")
+    names = list(materials.table)
+    if not names:
+        raise materials.error("expected at least one material", None)
+    material_table = MaterialTable(names, [_model(materials.sub(name), KINDS) for name in names])
     shape_list = top.raw("shapes", None)
     if not isinstance(shape_list, list) or not shape_list:
         raise top.error("expected a non-empty array of tables ([[shapes]])", "shapes")
     light_list = top.raw("lights", [])
     if not isinstance(light_list, list):
         raise top.error("expected an array of tables ([[lights]])", "lights")
-    other_lights = [_light(Fields(table, f"lights[{i}]", source), base) for i, table in enumerate(light_list)]
-    environments = [i for i, light in enumerate(other_lights) if isinstance(light, Environment)]
+    lights = [_model(Fields(table, f"lights[{i}]", source, top.base), LIGHTS) for i, table in enumerate(light_list)]
+    environments = [i for i, light in enumerate(lights) if light.hit_by_escaping_rays]
     if len(environments) > 1:
         raise top.error(f"at most one environment light is supported, got {len(environments)} "
                         f"(lights{environments})", "lights")
     top.finish()
-
-    vertices, indices, material_ids, shape_ids, names = [], [], [], [], []
-    emit_tris, emit_light, emit_radiance, emit_two_sided = [], [], [], []
-    offset = triangle_offset = 0
-    for i, table in enumerate(shape_list):
-        shape = Fields(table, f"shapes[{i}]", source)
-        name = shape.string("name", f"shapes[{i}]")
-        if name != f"shapes[{i}]":
-            shape.path = f"shapes[{i}] ({name!r})"
-        v, f = _shape_geometry(shape, base)
-        material = shape.string("material")
-        if material not in material_names:
-            raise shape.error(f"unknown material {material!r} (defined: {', '.join(material_names)})", "material")
-        emitter = shape.sub("emitter", None)
-        radiance = two_sided = None
-        if emitter is not None:
-            radiance = _built(emitter, lambda: check_emission(_colour(emitter, "radiance", base=base), "radiance"))
-            two_sided = emitter.boolean("two_sided", False)
-            emitter.finish()
-        shape.finish()
-
-        vertices.append(v)
-        indices.append(f + offset)
-        material_ids.append(np.full(len(f), material_names.index(material)))
-        shape_ids.append(np.full(len(f), i))
-        names.append(name)
-        if radiance is not None:
-            emit_tris.append(triangle_offset + np.arange(len(f)))
-            emit_light.append(np.full(len(f), len(emit_radiance)))
-            emit_radiance.append(radiance)
-            emit_two_sided.append(two_sided)
-        offset += len(v)
-        triangle_offset += len(f)
-
-    mesh = TriangleMesh(np.concatenate(vertices), np.concatenate(indices), np.concatenate(material_ids),
-                        np.concatenate(shape_ids))
-    area = AreaLights(mesh, np.concatenate(emit_tris or [np.zeros(0, np.int64)]),
-                      np.concatenate(emit_light or [np.zeros(0, np.int64)]), ColourTable(emit_radiance, "illuminant"),
-                      np.array(emit_two_sided, dtype=bool))
-    # Infinite lights: their power (for light selection) is what crosses the geometry's bounding sphere;
+    mesh, shape_names, emitters = _shapes(shape_list, names, source, top.base)
+    # Lights at infinity: their power (for light selection) is what crosses the geometry's bounding sphere;
     # light tracing and BDPT start their rays on a disk outside a sphere that also holds a thin lens.
     lo, hi = mesh.bounds()
     scene_radius = 0.5 * float(np.linalg.norm(hi - lo))
     if camera.lens_radius > 0:
         lo = np.minimum(lo, camera.position - camera.lens_radius)
         hi = np.maximum(hi, camera.position + camera.lens_radius)
-    lights = LightSet(area, other_lights, scene_radius=scene_radius, disk_center=0.5 * (lo + hi),
-                      disk_radius=0.5 * float(np.linalg.norm(hi - lo)))
-    return Scene(camera=camera, mesh=mesh, materials=MaterialTable(material_names, materials), lights=lights,
-                 shape_names=names, source=source)
+    light_set = LightSet(emitters + lights, mesh, scene_radius=scene_radius, disk_center=0.5 * (lo + hi),
+                         disk_radius=0.5 * float(np.linalg.norm(hi - lo)))
+    return Scene(camera=camera, mesh=mesh, materials=material_table, lights=light_set, shape_names=shape_names,
+                 source=source)
 
 
-def _camera(fields: Fields) -> PinholeCamera:
-    kind = fields.string("type", "pinhole", choices=CAMERA_TYPES)
-    position = fields.vector("position", 3)
-    look_at = fields.vector("look_at", 3)
-    up = fields.vector("up", 3, [0.0, 1.0, 0.0])
-    fov = fields.number("fov", low=0.0, high=180.0, low_open=True, high_open=True)
-    fov_axis = fields.string("fov_axis", "smaller", choices=FOV_AXES)
-    width, height = fields.vector("resolution", 2, integer=True, low=1)
-    lens = {}
-    if kind == "thinlens":
-        lens["aperture_radius"] = fields.number("aperture_radius", low=0.0, low_open=True)
-        if fields.has("focus_distance"):
-            lens["focus_distance"] = fields.number("focus_distance", low=0.0, low_open=True)
-    fields.finish()
-    if kind == "thinlens":
-        return _built(fields, lambda: ThinLensCamera(position, look_at, up, fov, int(width), int(height),
-                                                     fov_axis=fov_axis, **lens))
-    return _built(fields, lambda: PinholeCamera(position, look_at, up, fov, int(width), int(height), fov_axis=fov_axis))
-
-
-def _colour(fields: Fields, name: str, default=Fields.REQUIRED, *, base: Path) -> Colour:
-    """An RGB triple of numbers >= 0, or a spectrum table (see docs/scene-format.md)."""
-    value = fields.raw(name, default)
-    if isinstance(value, dict):
-        return _spectrum(fields.sub(name), base)
-    if not isinstance(value, (list, tuple)):
-        raise fields.error(f"expected 3 numbers (RGB) or a spectrum table, got {value!r}", name)
-    return tuple(float(x) for x in fields.vector(name, 3, default, low=0.0))
-
-
-def _spectrum(fields: Fields, base: Path) -> Colour:
-    forms = [key for key in ("wavelengths", "file", "blackbody", "illuminant") if fields.has(key)]
-    if len(forms) != 1:
-        raise fields.error("expected exactly one of: wavelengths (with values), file, blackbody, illuminant", None)
-    scale = fields.number("scale", 1.0, low=0.0)
-    form = forms[0]
-    if form == "wavelengths":
-        wavelengths = fields.raw("wavelengths")
-        values = fields.raw("values")
-        if not (isinstance(wavelengths, list) and isinstance(values, list)):
-            raise fields.error("expected lists of wavelengths (nm) and values of the same length", "wavelengths")
-        spectrum = _built(fields, lambda: SampledSpectrum(tuple(wavelengths), tuple(values), scale))
-    elif form == "file":
-        path = base / fields.string("file")
-        if not path.is_file():
-            raise fields.error(f"spectrum file not found: {path}", "file")
-        spectrum = _built(fields, lambda: SampledSpectrum.from_csv(path, scale))
-    elif form == "blackbody":
-        spectrum = _built(fields, lambda: Blackbody(fields.number("blackbody", low=0.0, low_open=True), scale))
-    else:
-        spectrum = _built(fields, lambda: Illuminant(fields.string("illuminant"), scale))
-        _built(fields, spectrum.on_grid)  # an unknown name fails here, with the names colour-science knows
-    fields.finish()
-    return spectrum
-
-
-def _ior(fields: Fields):
-    """A number > 0, or a dispersion law: { cauchy = [a, b] } or { sellmeier = { b = [...], c = [...] } }."""
-    value = fields.raw("ior", 1.5)
-    if not isinstance(value, dict):
-        return fields.number("ior", 1.5, low=0.0, low_open=True)
-    law = fields.sub("ior")
-    if not (law.has("cauchy") or law.has("sellmeier")):
-        raise fields.error("expected a number > 0 or a dispersion law: { cauchy = [a, b] } or "
-                           "{ sellmeier = { b = [...], c = [...] } }", "ior")
-    if law.has("cauchy"):
-        a, b = law.vector("cauchy", 2)
-        result = _built(law, lambda: Cauchy(float(a), float(b)))
-    else:
-        sellmeier = law.sub("sellmeier")
-        b, c = sellmeier.vector("b", 3), sellmeier.vector("c", 3)
-        sellmeier.finish()
-        result = _built(law, lambda: Sellmeier(tuple(b), tuple(c)))
-    law.finish()
-    return result
-
-
-def _built(fields: Fields, make):
-    """``make()``, with a ValueError of the form "field: message" turned into a SceneError naming the field."""
-    try:
-        return make()
-    except ValueError as error:
-        field, _, message = str(error).partition(": ")
-        raise fields.error(message or str(error), field if message else None) from None
-
-
-def _material(table: Fields, base: Path):
-    kind = table.string("type", choices=MATERIAL_TYPES)
-    if kind == "diffuse":
-        args = (_colour(table, "reflectance", base=base),)
-    elif kind == "mirror":
-        args = (_colour(table, "reflectance", [1.0, 1.0, 1.0], base=base),)
-    elif kind == "dielectric":
-        args = (_ior(table),)
-    elif kind == "conductor":
-        args = (_colour(table, "eta", base=base), _colour(table, "k", base=base), table.number("alpha"))
-    else:
-        args = (_colour(table, "diffuse", base=base), _colour(table, "specular", base=base),
-                table.number("exponent", low=0.0))
-    table.finish()
-    return _built(table, lambda: KINDS[kind](*args))
-
-
-def _materials(fields: Fields, base: Path) -> tuple[list[str], list]:
-    names, materials = [], []
-    for name in fields.table:
-        materials.append(_material(fields.sub(name), base))
+def _shapes(shape_list: list, material_names: list[str], source: str, base: Path):
+    """The mesh of all shapes, their names, and the area lights of those that emit."""
+    vertices, indices, material_ids, shape_ids, names, emitters = [], [], [], [], [], []
+    offset = triangle_offset = 0
+    for i, table in enumerate(shape_list):
+        shape = Fields(table, f"shapes[{i}]", source, base)
+        name = shape.string("name", f"shapes[{i}]")
+        if name != f"shapes[{i}]":
+            shape.path = f"shapes[{i}] ({name!r})"
+        v, f = _shape_geometry(shape)
+        material = shape.string("material")
+        if material not in material_names:
+            raise shape.error(f"unknown material {material!r} (defined: {', '.join(material_names)})", "material")
+        emitter = shape.sub("emitter", None)
+        if emitter is not None:
+            emitters.append(AreaLight.from_fields(emitter).on(triangle_offset + np.arange(len(f))))
+        shape.finish()
+        vertices.append(v)
+        indices.append(f + offset)
+        material_ids.append(np.full(len(f), material_names.index(material)))
+        shape_ids.append(np.full(len(f), i))
         names.append(name)
-    if not names:
-        raise fields.error("expected at least one material", None)
-    return names, materials
+        offset += len(v)
+        triangle_offset += len(f)
+    mesh = TriangleMesh(np.concatenate(vertices), np.concatenate(indices), np.concatenate(material_ids),
+                        np.concatenate(shape_ids))
+    return mesh, names, emitters
 
 
-def _light(fields: Fields, base: Path):
-    kind = fields.string("type", choices=LIGHT_TYPES)
-    if kind == "point":
-        args = (tuple(fields.vector("position", 3)), _colour(fields, "intensity", base=base))
-    elif kind == "spot":
-        cone = fields.number("cone_angle", 30.0, low=0.0, high=90.0, low_open=True)
-        args = (tuple(fields.vector("position", 3)), tuple(fields.vector("look_at", 3)),
-                _colour(fields, "intensity", base=base), cone,
-                fields.number("falloff_start", min(25.0, cone), low=0.0, high=cone))
-    elif kind == "directional":
-        args = (tuple(fields.vector("direction", 3)), _colour(fields, "irradiance", base=base))
-    else:
-        args = (_colour(fields, "radiance", base=base),)
-    fields.finish()
-    light_types = {"point": PointLight, "spot": SpotLight, "directional": DirectionalLight,
-                   "environment": Environment}
-    return _built(fields, lambda: light_types[kind](*args))
-
-
-def _shape_geometry(shape: Fields, base: Path) -> tuple[np.ndarray, np.ndarray]:
-    kind = shape.string("type", choices=SHAPE_TYPES)
-    if kind == "triangles":
-        v = shape.array("vertices", 3)
-        f = shape.array("triangles", 3, integer=True)
-        if f.min() < 0 or f.max() >= len(v):
-            raise shape.error(f"vertex indices must lie in [0, {len(v) - 1}], got {f.min()}..{f.max()}", "triangles")
-    elif kind == "mesh":
-        v, f = _mesh_file(shape, base)
-    elif kind == "quad":
-        v, f = builtin.quad(shape.vector("corner", 3), shape.vector("edge_u", 3), shape.vector("edge_v", 3))
-    elif kind == "box":
-        size = shape.vector("size", 3, low=0.0)
-        if np.any(size <= 0):
-            raise shape.error(f"expected 3 numbers > 0, got {size.tolist()}", "size")
-        v, f = builtin.box(shape.vector("center", 3, [0.0, 0.0, 0.0]), size)
-    else:
-        v, f = builtin.sphere(shape.vector("center", 3, [0.0, 0.0, 0.0]),
-                              shape.number("radius", low=0.0, low_open=True),
-                              shape.integer("subdivisions", 3, low=0, high=MAX_SUBDIVISIONS))
+def _shape_geometry(shape: Fields) -> tuple[np.ndarray, np.ndarray]:
+    v, f = SHAPES[shape.string("type", choices=SHAPES)](shape)
     transform = shape.sub("transform", None)
     mirrored = False
     if transform is not None:
@@ -289,26 +136,6 @@ def _shape_geometry(shape: Fields, base: Path) -> tuple[np.ndarray, np.ndarray]:
     if shape.boolean("flip_normals", False) != mirrored:
         f = f[:, ::-1]
     return v, _check_triangles(shape, v, f, shape.boolean("drop_degenerate", False))
-
-
-def _mesh_file(shape: Fields, base: Path) -> tuple[np.ndarray, np.ndarray]:
-    name = shape.string("file")
-    path = (base / name) if not os.path.isabs(name) else Path(name)
-    if not path.is_file():
-        raise shape.error(f"mesh file not found: {path}", "file")
-    try:
-        mesh = trimesh.load(str(path), force="mesh", process=False)
-    except Exception as error:  # trimesh raises many types for unreadable files
-        raise shape.error(f"cannot read mesh file {path}: {error}", "file") from None
-    v = np.asarray(getattr(mesh, "vertices", np.zeros((0, 3))), dtype=np.float64)
-    f = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
-    if f.size == 0:
-        raise shape.error(f"mesh file {path} contains no triangles", "file")
-    if not np.all(np.isfinite(v)):
-        raise shape.error(f"mesh file {path} has non-finite vertex coordinates", "file")
-    if f.ndim != 2 or f.shape[1] != 3 or f.min() < 0 or f.max() >= len(v):
-        raise shape.error(f"mesh file {path} has faces referring to vertices outside 0..{len(v) - 1}", "file")
-    return v, f
 
 
 def _apply_transform(fields: Fields, v: np.ndarray) -> np.ndarray:

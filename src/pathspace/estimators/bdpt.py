@@ -1,7 +1,7 @@
 """Bidirectional path tracing (Veach & Guibas 1995; Veach 1997, ch. 10) with every (s, t) strategy.
 
 Each pixel sample builds a camera subpath and a light subpath and joins
-them in every way the scene allows (see :mod:`pathspace.integrators.connections`):
+them in every way the scene allows (see :mod:`pathspace.estimators.connections`):
 s = 0 (the camera subpath hits a light), s = 1 (a light sample), t = 1 (a
 lens sample, splatted), t = 0 (the light subpath passes through a thin lens,
 splatted) and s, t >= 2 (a shadow ray between the two).  The strategies are
@@ -40,7 +40,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .bdpt_mis import HEURISTICS, SubpathPdfs, mis_weights
+from ..mis import SubpathPdfs, check_heuristic, mis_weights
+from . import parameters as p
 from .bidirectional import Bidirectional
 from .connections import Batch, Contributions, emitter_hits, joins, lens_hits, lens_samples, light_samples
 
@@ -51,30 +52,17 @@ __all__ = ["BDPT"]
 class BDPT(Bidirectional):
     """Bidirectional path tracer; see the module docstring for the parameters."""
 
-    mis: str = "power"
-    mis_beta: float = 2.0
-    strategy: tuple | None = None
+    mis: str = p.mis_heuristic("power")
+    mis_beta: float = p.mis_beta()
+    strategy: tuple | None = p.mis_strategy()
 
     name = "bdpt"
     uses_lens_hits = True
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.mis not in HEURISTICS:
-            raise ValueError(f"mis: expected one of {tuple(HEURISTICS)}, got {self.mis!r}")
-        if not (isinstance(self.mis_beta, (int, float)) and np.isfinite(self.mis_beta) and self.mis_beta > 0):
-            raise ValueError(f"mis_beta: expected a finite number > 0, got {self.mis_beta!r}")
-        if self.mis == "single":
-            st = self.strategy
-            if not (isinstance(st, (tuple, list)) and len(st) == 2
-                    and all(isinstance(x, (int, np.integer)) and x >= 0 for x in st) and st[0] + st[1] >= 2):
-                raise ValueError(f"strategy: mis='single' needs (s, t) with s, t >= 0 and s + t >= 2, got {st!r}")
-            self.strategy = (int(st[0]), int(st[1]))
-            if 0 < self.max_depth < sum(self.strategy) - 1:
-                raise ValueError(f"strategy: {self.strategy} forms paths of {sum(self.strategy) - 1} segments, "
-                                 f"longer than max_depth={self.max_depth}")
-        elif self.strategy is not None:
-            raise ValueError("strategy: only used with mis='single'")
+        self.mis, self.mis_beta, self.strategy = check_heuristic(self.mis, self.mis_beta, self.strategy,
+                                                                 max_depth=self.max_depth)
 
     def plan(self, scene) -> list[str]:
         """What this estimator will do on ``scene``, and what it leaves out and why."""
@@ -84,7 +72,7 @@ class BDPT(Bidirectional):
                    "single": f"only strategy (s, t) = {self.strategy}",
                    "none": "no MIS: every strategy weighted 1 (the image is the sum of the strategies)"}[self.mis]
         lines = [f"bidirectional path tracing, max_depth={depth}; {weights}",
-                 f"Russian roulette: {self.rr} (local, in the vertex densities)"]
+                 f"{self.roulette.describe()} (local, in the vertex densities)"]
         camera, lights = scene.camera, scene.lights
         lines.append("pinhole camera: no t = 0 strategy (rays cannot hit it)" if camera.delta_position
                      else "thin-lens camera: t = 0 strategy (light subpaths passing through the lens)")

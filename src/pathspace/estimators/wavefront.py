@@ -10,8 +10,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import WorkItem
-
 __all__ = ["ItemBook", "Lanes"]
 
 
@@ -27,14 +25,13 @@ class ItemBook:
     def __init__(self, channels: int) -> None:
         self.channels = channels
         self.first: list[int] = []      # first ticket of each open item, increasing
-        self.open_items: list[WorkItem] = []
+        self.open_items: list = []
         self.values: list[np.ndarray] = []
         self.remaining: list[int] = []
         self._next_ticket = 0
 
-    def open(self, item: WorkItem) -> np.ndarray:
-        """Start an item; return the tickets of its samples."""
-        count = len(item.pixels)
+    def open(self, item, count: int) -> np.ndarray:
+        """Start an item (any key: a work item, a name) of ``count`` samples; return their tickets."""
         tickets = np.arange(self._next_ticket, self._next_ticket + count, dtype=np.int64)
         self.first.append(self._next_ticket)
         self.open_items.append(item)
@@ -53,7 +50,7 @@ class ItemBook:
                     self.values[j][c].put(where, values[c, lo:hi])
                 self.remaining[j] -= hi - lo
 
-    def finished(self) -> list[tuple[WorkItem, np.ndarray]]:
+    def finished(self) -> list[tuple[object, np.ndarray]]:
         """Items whose every sample is done, removed from the book, in the order they were opened."""
         out = []
         for j in reversed(range(len(self.remaining))):

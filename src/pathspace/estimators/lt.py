@@ -8,8 +8,8 @@ pinhole camera, caustics seen through glass) cannot be formed, so those
 parts of the image stay black; everywhere else the estimate converges to
 the same image as path tracing.
 
-Parameters: ``max_depth``, ``rr``, ``rr_probability``, ``diffuse_sampling``
-and ``pyramid`` as for :mod:`pathspace.integrators.bdpt`.
+Parameters: ``max_depth``, the roulette parameters, ``diffuse_sampling``
+and ``pyramid`` as for :mod:`pathspace.estimators.bdpt`.
 """
 from __future__ import annotations
 
@@ -34,7 +34,7 @@ class LightTracer(Bidirectional):
     def plan(self, scene) -> list[str]:
         """What this estimator will do on ``scene``, and what it leaves out and why."""
         depth = "unbounded" if self.max_depth < 0 else self.max_depth
-        lines = [f"light tracing, max_depth={depth}; Russian roulette: {self.rr}"]
+        lines = [f"light tracing, max_depth={depth}; {self.roulette.describe()}"]
         delta = scene.materials.delta_names
         if delta:
             lines.append(f"specular materials ({', '.join(delta)}): paths reaching the camera only through them "

@@ -1,7 +1,9 @@
-"""Typed, validated reads of one table of a scene description.
+"""Typed, validated reads of one table of a scene description, and the error they raise.
 
-Each read names the field by its full path, so that every error says which
-file, which field and what was expected, e.g.::
+Every model (camera, material, light, shape) reads its own parameters
+through a :class:`Fields` reader over its table.  Each read names the field
+by its full path, so that every error says which file, which field and what
+was expected, e.g.::
 
     scene.toml: shapes[3].emitter.radiance: expected 3 finite numbers >= 0, got [1, -2, 0]
 
@@ -10,11 +12,22 @@ Unknown keys are errors too (a misspelt field must not be silently ignored).
 from __future__ import annotations
 
 import math
-from typing import Any, Iterable
+from pathlib import Path
+from typing import Any, Callable, Iterable
 
 import numpy as np
 
-from .errors import SceneError
+from .spectra import Blackbody, Colour, Illuminant, SampledSpectrum
+
+__all__ = ["Fields", "SceneError"]
+
+
+class SceneError(ValueError):
+    """A scene file or scene description is invalid.
+
+    The message names the file, the field (as a path such as
+    ``shapes[2].emitter.radiance``) and what was expected.
+    """
 
 _MISSING = object()
 # Integers beyond this are rejected before NumPy sees them (it cannot hold them in 64 bits).
@@ -31,9 +44,10 @@ class Fields:
 
     REQUIRED = _MISSING  # the default that makes a field required
 
-    def __init__(self, table: Any, path: str, source: str) -> None:
+    def __init__(self, table: Any, path: str, source: str, base: str | Path | None = None) -> None:
         self.source = source
         self.path = path
+        self.base = Path(base) if base is not None else Path.cwd()  # where relative file names start
         if not isinstance(table, dict):
             raise self.error(f"expected a table, got {_show(table)}", field=None)
         self.table = table
@@ -70,7 +84,7 @@ class Fields:
         value = self._get(field, default)
         if value is None:
             return None
-        return Fields(value, self.name(field), self.source)
+        return Fields(value, self.name(field), self.source, self.base)
 
     def string(self, field: str, default: Any = _MISSING, choices: Iterable[str] | None = None) -> str:
         """A string, optionally one of ``choices``."""
@@ -144,6 +158,55 @@ class Fields:
             if not ok:
                 raise self.error(f"{expected}; row {i} is {_show(row)}", field)
         return np.array(value, dtype=np.int64 if integer else np.float64)
+
+    def file(self, field: str, what: str) -> Path:
+        """The name of an existing ``what`` file ("mesh", "spectrum"), relative to the scene file's folder."""
+        name = self.string(field)
+        path = Path(name) if Path(name).is_absolute() else self.base / name
+        if not path.is_file():
+            raise self.error(f"{what} file not found: {path}", field)
+        return path
+
+    def colour(self, field: str, default: Any = _MISSING) -> Colour:
+        """An RGB triple of numbers >= 0, or a spectrum table (see docs/scene-format.md)."""
+        value = self.raw(field, default)
+        if isinstance(value, dict):
+            return self._spectrum(self.sub(field))
+        if not isinstance(value, (list, tuple)):
+            raise self.error(f"expected 3 numbers (RGB) or a spectrum table, got {_show(value)}", field)
+        return tuple(float(x) for x in self.vector(field, 3, default, low=0.0))
+
+    def _spectrum(self, fields: "Fields") -> Colour:
+        forms = [key for key in ("wavelengths", "file", "blackbody", "illuminant") if fields.has(key)]
+        if len(forms) != 1:
+            raise fields.error("expected exactly one of: wavelengths (with values), file, blackbody, illuminant", None)
+        scale = fields.number("scale", 1.0, low=0.0)
+        form = forms[0]
+        if form == "wavelengths":
+            wavelengths, values = fields.raw("wavelengths"), fields.raw("values")
+            if not (isinstance(wavelengths, list) and isinstance(values, list)):
+                raise fields.error("expected lists of wavelengths (nm) and values of the same length", "wavelengths")
+            spectrum = fields.build(lambda: SampledSpectrum(tuple(wavelengths), tuple(values), scale))
+        elif form == "file":
+            path = fields.file("file", "spectrum")
+            spectrum = fields.build(lambda: SampledSpectrum.from_csv(path, scale))
+        elif form == "blackbody":
+            spectrum = fields.build(lambda: Blackbody(fields.number("blackbody", low=0.0, low_open=True), scale))
+        else:
+            spectrum = fields.build(lambda: Illuminant(fields.string("illuminant"), scale))
+            fields.build(spectrum.on_grid)  # an unknown name fails here, with the names colour-science knows
+        fields.finish()
+        return spectrum
+
+    def build(self, make: Callable[[], Any]) -> Any:
+        """``make()``, with a ValueError of the form "field: message" turned into a SceneError naming the field."""
+        try:
+            return make()
+        except SceneError:
+            raise
+        except ValueError as error:
+            field, _, message = str(error).partition(": ")
+            raise self.error(message or str(error), field if message else None) from None
 
     def finish(self) -> None:
         """Raise for any key of the table that no read asked for (a misspelt or unsupported field)."""

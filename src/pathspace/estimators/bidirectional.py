@@ -1,0 +1,208 @@
+"""What bidirectional estimators (light tracing, BDPT) share: batches of subpaths, weighting, splatting.
+
+A work item's lanes (one per pixel and pass) each get a light subpath and,
+for BDPT, a camera subpath.  Connections between them contribute either to
+the lane's own pixel or, when they reach the camera through a lens sample
+or a lens hit (t <= 1), to the pixel they land on: a *splat*.  Each pass
+launches one light subpath per pixel, so the splats of a pass, summed per
+pixel, estimate the image (pbrt's light-tracing normalisation: We integrates
+to 1 over the film), and one pass gives one independent sample of every
+pixel -- its own-pixel value plus the pass's splats.  Items hand the film
+both, and the film completes a pass once all its tiles are in.
+
+Random numbers come from three streams per (pass, tile) unit (see
+:data:`STREAMS`): camera subpaths, light subpaths, and the lane's
+wavelengths; connections use the uniforms drawn with their vertices.
+:meth:`Bidirectional.evaluate` computes every strategy's contribution of the
+paths made from given numbers.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Callable, Iterator, Mapping
+
+import numpy as np
+
+from ..roulette import RussianRoulette
+from ..sampler import Sampler
+from ..spectra import RGBMode
+from . import parameters as p
+from .base import Counters, Estimator, ItemResult, RenderJob, Splats, WorkItem
+from .connections import Batch, Contributions
+from .control import RenderControl
+from .subpaths import SAFETY_VERTICES, SubpathSettings, camera_subpaths, light_subpaths
+from .wavefront import Lanes
+
+__all__ = ["Bidirectional", "StrategyContributions", "STREAMS"]
+
+# The random streams of a (pass, tile) unit, by name and the number appended to the unit's key.
+STREAMS = {"camera": 0, "light": 1, "wavelengths": 2}
+
+
+@dataclass
+class StrategyContributions:
+    """Every connection of a batch of lanes: ``lane``, strategy ``s``, ``t``, film values (3, n) ``unweighted``
+    and ``weighted`` (by ``weight``), and the film ``pixel`` it lands on (``raster`` (2, n) position for
+    splats, t <= 1; NaN for the lane's own pixel)."""
+
+    lane: np.ndarray
+    s: np.ndarray
+    t: np.ndarray
+    unweighted: np.ndarray
+    weighted: np.ndarray
+    weight: np.ndarray
+    pixel: np.ndarray
+    raster: np.ndarray
+
+    @classmethod
+    def concatenate(cls, parts: list["StrategyContributions"]) -> "StrategyContributions":
+        """The rows of all ``parts``."""
+        if not parts:
+            empty = np.zeros(0, np.int64)
+            return cls(empty, empty, empty, np.zeros((3, 0)), np.zeros((3, 0)), np.zeros(0), empty, np.zeros((2, 0)))
+        return cls(*(np.concatenate([getattr(part, f) for part in parts], axis=-1) for f in
+                     ("lane", "s", "t", "unweighted", "weighted", "weight", "pixel", "raster")))
+
+
+@dataclass
+class Bidirectional(Estimator):
+    """Base of estimators built from light (and camera) subpaths; subclasses choose the connections.
+
+    Its fields are the parameters all of them take (see :mod:`pathspace.estimators.bdpt`).
+    """
+
+    max_depth: int = p.max_depth()
+    rr: str = p.roulette_policy("albedo")
+    rr_depth: int = p.roulette_depth(1)
+    rr_probability: float = p.roulette_probability()
+    rr_cap: float = p.roulette_cap()
+    diffuse_sampling: str = p.diffuse_sampling()
+    pyramid: int = p.pyramid()
+    roulette: RussianRoulette = field(init=False, repr=False)
+
+    uses_camera_subpaths = True
+    uses_lens_hits = True
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        self.roulette = RussianRoulette(self.rr, self.rr_depth, self.rr_probability, self.rr_cap)
+
+    @property
+    def depth_limit(self) -> int:
+        """Longest path in segments that connections may form."""
+        return self.max_depth if self.max_depth > 0 else SAFETY_VERTICES
+
+    def _contributions(self, batch: Batch) -> Iterator[Contributions]:
+        """The unweighted contributions of the strategies this estimator uses, part by part."""
+        raise NotImplementedError
+
+    def _weights(self, part: Contributions, batch: Batch) -> np.ndarray:
+        """The MIS weight of every connection of ``part``."""
+        raise NotImplementedError
+
+    # -- rendering ---------------------------------------------------------------------------------
+
+    def render_items(self, job: RenderJob, next_item: Callable[[], WorkItem | None],
+                     counters: Counters) -> Iterator[ItemResult]:
+        """Render each item ``next_item()`` hands out as one batch of subpaths."""
+        while (item := next_item()) is not None:
+            yield self._render_item(job, item, counters)
+
+    def _render_item(self, job: RenderJob, item: WorkItem, counters: Counters) -> ItemResult:
+        scene, mode = job.scene, job.mode
+        count = item.pixels.size
+        result = ItemResult(item, np.zeros((3, count)))
+        if not scene.lights.count:
+            return result
+        samplers = {name: job.samplers.open([key + (code,) for key in item.keys], item.counts)
+                    for name, code in STREAMS.items()}
+        units = np.arange(0, count + 1, item.pixel_stop - item.pixel_start)
+        batch, state = self._subpaths(scene, mode, item.pixels, samplers, units, counters, job.control)
+        own = np.zeros((batch.colours.channels, count))
+        lane_pass = item.lane_pass
+        for part in self._contributions(batch):
+            job.control.check()
+            _, weighted, pixel, splat = self._weighted(part, batch, item.pixels)
+            mine = np.flatnonzero(~splat)
+            if mine.size:
+                for c in range(batch.colours.channels):
+                    own[c] += np.bincount(part.lane[mine], weights=weighted[c, mine], minlength=count)
+            if mine.size < part.count:
+                on = np.flatnonzero(splat)
+                result.splats.append(Splats(lane_pass.take(part.lane[on]), pixel[on],
+                                            mode.to_film(weighted[:, on], state, part.lane[on])))
+            if self.pyramid:
+                self._record_strategies(result.layers, part, weighted, pixel, mode, state, lane_pass)
+        counters.rays += batch.rays
+        counters.nonfinite_contributions += batch.nonfinite
+        result.samples = mode.to_film(own, state, np.arange(count))
+        return result
+
+    def evaluate(self, scene, pixels: np.ndarray, samplers: Mapping[str, Sampler], mode=None) -> StrategyContributions:
+        """Every strategy's contribution of the paths through ``pixels`` (N,) built from given numbers:
+        ``samplers`` has a sampler of N lanes for each stream of :data:`STREAMS` (e.g.
+        :class:`~pathspace.sampler.ReplaySampler` s of primary samples).  The weighted values of a lane's
+        own pixel (``raster`` NaN) plus its splats are the samples a render adds for these numbers."""
+        mode = RGBMode() if mode is None else mode
+        pixels = np.asarray(pixels, dtype=np.int64)
+        if not scene.lights.count:
+            return StrategyContributions.concatenate([])
+        batch, state = self._subpaths(scene, mode, pixels, samplers, np.array([0, pixels.size]), Counters(),
+                                      RenderControl())
+        rows = []
+        for part in self._contributions(batch):
+            weights, weighted, pixel, _ = self._weighted(part, batch, pixels)
+            rows.append(StrategyContributions(part.lane, part.s, part.t, mode.to_film(part.value, state, part.lane),
+                                              mode.to_film(weighted, state, part.lane), weights, pixel, part.raster))
+        return StrategyContributions.concatenate(rows)
+
+    def _subpaths(self, scene, mode, pixels: np.ndarray, samplers: Mapping[str, Sampler], units: np.ndarray,
+                  counters: Counters, control: RenderControl) -> tuple[Batch, Lanes]:
+        """The subpaths of lanes through ``pixels`` from ``samplers``' numbers, and the lanes' colour state."""
+        count = pixels.size
+        state = Lanes(mode.path_fields, **mode.start(samplers["wavelengths"].draw(mode.camera_dims)))
+        colours = mode.colours(state)
+        settings = SubpathSettings(scene, colours, {"diffuse_sampling": self.diffuse_sampling}, self.roulette,
+                                   self.depth_limit + 1, counters, control)
+        eye = camera_subpaths(settings, pixels, samplers["camera"]) if self.uses_camera_subpaths else None
+        lens = self.uses_lens_hits and not scene.camera.delta_position
+        light, hits = light_subpaths(settings, count, samplers["light"], lens)
+        longest = max(int(light.length.max()), 0 if eye is None else int(eye.length.max())) - 1
+        counters.longest = max(counters.longest, longest)
+        terminated = light.terminated if eye is None else light.terminated | eye.terminated
+        if terminated.any():
+            mode.terminate_secondary(state, terminated)
+        return Batch(scene, light, eye, hits if lens else None, colours, settings.options, self.depth_limit,
+                     units), state
+
+    def _weighted(self, part: Contributions, batch: Batch, pixels: np.ndarray):
+        """(MIS weights (n,), weighted values (C, n), film pixel (n,), whether each is a splat (n,)) of ``part``'s
+        connections; connections whose weight is not finite are dropped and counted like non-finite values."""
+        weights = self._weights(part, batch)
+        finite = np.isfinite(weights)
+        if not finite.all():
+            batch.nonfinite += int(finite.size - np.count_nonzero(finite))
+            weights = np.where(finite, weights, 0.0)
+        splat = np.isfinite(part.raster[0])
+        pixel = np.where(splat, _pixel_of(part.raster, batch.scene.camera), pixels.take(part.lane))
+        return weights, part.value * weights[None, :], pixel, splat
+
+    def _record_strategies(self, layers: dict, part: Contributions, weighted: np.ndarray, film_pixel, mode,
+                           state, lane_pass: np.ndarray) -> None:
+        """Unweighted and weighted contributions per strategy (s, t) of paths up to ``pyramid`` segments, as
+        splats into the layers ``s{s}t{t}.unweighted`` and ``s{s}t{t}.weighted``."""
+        length = part.s + part.t - 1
+        for s, t in {(int(a), int(b)) for a, b in zip(part.s[length <= self.pyramid], part.t[length <= self.pyramid])}:
+            pick = np.flatnonzero((part.s == s) & (part.t == t))
+            lanes = part.lane.take(pick)
+            for kind, value in (("unweighted", part.value), ("weighted", weighted)):
+                film = mode.to_film(np.take(value, pick, axis=1), state, lanes)
+                layers.setdefault(f"s{s}t{t}.{kind}", []).append(Splats(lane_pass.take(lanes), film_pixel.take(pick),
+                                                                        film))
+
+
+def _pixel_of(raster: np.ndarray, camera) -> np.ndarray:
+    """Pixel index of raster positions (NaN rows give 0; callers mask them)."""
+    x = np.clip(np.nan_to_num(raster[0]), 0, camera.width - 1).astype(np.int64)
+    y = np.clip(np.nan_to_num(raster[1]), 0, camera.height - 1).astype(np.int64)
+    return y * camera.width + x

@@ -1,0 +1,325 @@
+"""The strategies of bidirectional path tracing: every way of joining a light and a camera subpath.
+
+A lane holds a light subpath y_0 .. y_{nL-1} and a camera subpath
+z_0 .. z_{nE-1} (see :mod:`pathspace.estimators.subpaths`).  Strategy
+(s, t) forms the path x_0 .. x_k, k = s + t - 1 segments, from y_0 .. y_{s-1}
+and z_{t-1} .. z_0 (Veach 1997, ch. 10; pbrt-v3's ConnectBDPT):
+
+* s = 0: the camera subpath found a light itself (an emitting surface or the
+  environment at infinity);
+* s = 1: a fresh light sample joined to z_{t-1} (next-event estimation);
+* t = 1: a fresh lens sample joined to y_{s-1} (light tracing; splatted);
+* t = 0: the light subpath passed through a thin lens (splatted);
+* s, t >= 2: y_{s-1} and z_{t-1} joined by a shadow ray.
+
+Each function returns the *unweighted* contributions C*_{s,t} (Veach 1997,
+eq. 10.8) of every connection that carries any, as :class:`Contributions`,
+with what the MIS kernel needs: the densities that the connection changes
+(of the connection vertices x_{s-1} = "qs" and x_s = "pt" and their
+neighbours; see ``ext/mis.c``) and the flags of the path's light.  Only
+connections of at most ``max_depth`` segments are formed.  ``y`` and ``z``
+below are views (:class:`~pathspace.estimators.subpaths.Vertices`) of the
+connection vertices.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..bsdfs import MaterialLanes, Surface
+from ..mis import LIGHT_DELTA, Connections
+from ..vecmath import dot
+from .subpaths import LIGHT, SURFACE, LensHits, Subpaths, Vertices, cos_at, reverse_pdf, to_area
+from .visibility import light_sample_blocked, segment_blocked
+
+__all__ = ["Batch", "Contributions", "emitter_hits", "light_samples", "lens_samples", "lens_hits", "joins",
+           "CHUNK"]
+
+# General connections are formed and evaluated in chunks of at most this many.
+CHUNK = 1 << 17
+
+
+@dataclass
+class Batch:
+    """The subpaths of a batch of lanes and what every strategy reads.  ``units`` (lanes + 1,): the lanes
+    of unit j (one pass of one tile) are ``units[j]`` .. ``units[j+1] - 1``; joins are chunked unit by
+    unit, so that a unit's results do not depend on what else shares the batch."""
+
+    scene: object
+    light: Subpaths
+    eye: Subpaths | None
+    lens: LensHits | None
+    colours: object
+    options: dict
+    max_depth: int     # segments
+    units: np.ndarray
+    rays: int = 0      # shadow rays traced
+    nonfinite: int = 0  # contributions dropped because a channel or their weight was NaN or infinite
+
+    def __post_init__(self) -> None:
+        self.lane_flags = self.scene.lights.flags.take(self.light.entity.take(self.light.offset[:-1]))
+
+    def materials(self, vertices: Vertices) -> MaterialLanes:
+        """The materials of surface ``vertices``."""
+        return MaterialLanes(self.scene.materials, vertices.material, self.colours.take(vertices.lane), self.options)
+
+    def useful(self, value: np.ndarray) -> np.ndarray:
+        """Indices of the contributions (C, n) worth weighting: non-zero and finite; the non-finite ones
+        are counted in ``nonfinite`` (they never reach the film)."""
+        finite = np.isfinite(value).all(axis=0)
+        self.nonfinite += int(finite.size - np.count_nonzero(finite))
+        return np.flatnonzero((value != 0).any(axis=0) & finite)
+
+
+@dataclass
+class Contributions(Connections):
+    """Unweighted contributions of connections, one column each, with their MIS inputs (the
+    :class:`~pathspace.mis.Connections` fields: strategy, lane, changed densities)."""
+
+    value: np.ndarray         # (C, n)
+    raster: np.ndarray        # (2, n) film position of splats (t <= 1); NaN for the lane's own pixel
+    flags: np.ndarray         # (n,) uint8 light flags
+
+    @classmethod
+    def make(cls, lane, s, t, value, raster=None, **densities) -> "Contributions":
+        n = lane.size
+        zero = np.zeros(n)
+        return cls(lane=lane, s=np.broadcast_to(s, n).astype(np.int32), t=np.broadcast_to(t, n).astype(np.int32),
+                   value=value, raster=np.full((2, n), np.nan) if raster is None else raster,
+                   **{name: densities.get(name, zero) for name in ("qs_fwd", "qs_rev", "qs_minus_rev", "pt_fwd",
+                                                                   "pt_rev", "pt_minus_rev")},
+                   flags=densities["flags"])
+
+    @property
+    def count(self) -> int:
+        return int(self.lane.size)
+
+
+def _surface(vertices: Vertices) -> Surface:
+    """The shading frame of ``vertices`` seen from their previous vertex."""
+    return Surface.facing(vertices.n, -vertices.wo)
+
+
+def _at_previous(pdf_sa: np.ndarray, vertices: Vertices) -> np.ndarray:
+    """A solid-angle density at ``vertices`` of the direction toward their previous vertex, as an area
+    density there (kept in solid angle where that vertex is at infinity; see ``Subpaths.g_prev``)."""
+    return pdf_sa * vertices.g_prev
+
+
+# -- s = 0 -----------------------------------------------------------------------------------------
+
+def emitter_hits(batch: Batch) -> Contributions | None:
+    """Camera vertices z_{t-1} (t >= 2) on emitting surfaces or at infinity in the environment."""
+    eye, lights = batch.eye, batch.scene.lights
+    z = eye.at(np.flatnonzero((eye.index >= 1) & (eye.index <= batch.max_depth) & (eye.entity >= 0)))
+    if not z.size:
+        return None
+    value = z.beta * lights.le(z.entity, z.n, z.wo, batch.colours.take(z.lane))
+    z, value = _kept(batch, z, value)
+    # The light walk would start here (pt_rev) and go on to z_{t-2} (pt_minus_rev): emission's directional
+    # density, or from infinity the disk density times |cos| there.
+    origin, pdf_dir = lights.pdf_le(z.entity, z.n, z.wo)
+    return Contributions.make(z.lane, 0, z.index + 1, value, pt_fwd=z.fwd, pt_rev=origin,
+                              pt_minus_rev=_at_previous(pdf_dir, z), flags=lights.flags.take(z.entity))
+
+
+def _kept(batch: Batch, vertices: Vertices, value: np.ndarray) -> tuple[Vertices, np.ndarray]:
+    """The vertices and values (C, n) of the useful contributions (see :meth:`Batch.useful`)."""
+    keep = batch.useful(value)
+    return vertices.keep(keep), value[:, keep]
+
+
+# -- s = 1 -----------------------------------------------------------------------------------------
+
+def light_samples(batch: Batch) -> Contributions | None:
+    """Camera vertices z_{t-1} (t >= 2) joined to a fresh light sample (next-event estimation)."""
+    scene, eye = batch.scene, batch.eye
+    lights = scene.lights
+    if not lights.count:
+        return None
+    z = eye.at(np.flatnonzero((eye.kind == SURFACE) & ~eye.delta & (eye.index + 1 <= batch.max_depth)))
+    if not z.size:
+        return None
+    ls = lights.sample_li(z.p, z.u, batch.colours.take(z.lane), "power", "area")
+    f_cos, pdf_bsdf = batch.materials(z).eval(_surface(z), ls.wi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        value = np.where(ls.facing & (ls.pdf > 0), z.beta * f_cos * ls.value / ls.pdf, 0.0)
+    useful = batch.useful(value)
+    batch.rays += useful.size
+    useful = useful[~light_sample_blocked(scene, z.p, z.eps, z.n, ls, useful)]
+    if not useful.size:
+        return None
+    z, value, pdf_bsdf = z.keep(useful), value[:, useful], pdf_bsdf[useful]
+    wi, entity, normal = ls.wi[:, useful], ls.entity[useful], ls.normal[:, useful]
+    distance = ls.distance[useful].astype(np.float64)
+    infinite = ~np.isfinite(distance)
+    dist2 = np.where(infinite, 1.0, distance * distance)
+    # qs = the light point: its origin density, and the camera walk's density of reaching it from z_{t-1}.
+    qs_rev = np.where(infinite, pdf_bsdf * z.q, to_area(pdf_bsdf * z.q, normal, wi, dist2))
+    # pt = z_{t-1} as the light walk would reach it: emission toward it, to area (from infinity: disk x |cos|).
+    origin, pdf_emit = lights.pdf_le(entity, normal, -wi)
+    cos_here = np.abs(dot(z.n, wi)).astype(np.float64)
+    pt_rev = np.where(infinite, pdf_emit * cos_here, to_area(pdf_emit, z.n, wi, dist2))
+    pt_minus_rev = _at_previous(reverse_pdf(batch.materials(z), z.n, wi, z.wo) * z.q, z)
+    return Contributions.make(z.lane, 1, z.index + 1, value, qs_fwd=origin, qs_rev=qs_rev, pt_fwd=z.fwd,
+                              pt_rev=pt_rev, pt_minus_rev=pt_minus_rev, flags=lights.flags.take(entity))
+
+
+# -- t = 1 -----------------------------------------------------------------------------------------
+
+def lens_samples(batch: Batch) -> Contributions | None:
+    """Light vertices y_{s-1} joined to a fresh point on the lens (light tracing), splatted."""
+    scene, light = batch.scene, batch.light
+    camera, lights = scene.camera, scene.lights
+    # Lights seen directly: area lights only.  A point or spot light would land in a single pixel as
+    # I / (d^2 x the pixel's solid angle); path tracing cannot see it, and neither image draws it.
+    on_light = (light.kind == LIGHT) & (light.entity >= 0) & ~(lights.flags.take(np.maximum(light.entity, 0)) > 0)
+    y = light.at(np.flatnonzero(((light.kind == SURFACE) & ~light.delta | on_light) & (light.index + 1 <= batch.max_depth)))
+    if not y.size:
+        return None
+    wi, we, pdf_lens, lens, raster, valid = camera.sample_importance(y.p, y.u)
+    value, pdf_fwd, pdf_back = _toward_lens(batch, y, on_light.take(y.v), wi)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        value = np.where(valid & (pdf_lens > 0), y.beta * value * (we / pdf_lens), 0.0)
+    useful = batch.useful(value)
+    batch.rays += useful.size
+    lens32 = np.take(lens, useful, axis=1).astype(np.float32)
+    axis = np.repeat(camera.forward.astype(np.float32)[:, None], useful.size, axis=1)
+    blocked = segment_blocked(scene, np.take(y.p, useful, axis=1), y.eps.take(useful), np.take(y.n, useful, axis=1),
+                              lens32, np.zeros(useful.size, np.float32),
+                              axis if not camera.delta_position else np.zeros_like(axis))
+    useful = useful[~blocked]
+    if not useful.size:
+        return None
+    y, value, wi, lens = y.keep(useful), value[:, useful], wi[:, useful], lens[:, useful]
+    pdf_fwd, pdf_back, we = pdf_fwd[useful], pdf_back[useful], we[useful]
+    d = lens - y.p
+    dist2 = dot(d, d)
+    axis = np.repeat(camera.forward[:, None], y.size, axis=1)
+    # pt = the lens point: the camera's positional density, and the light walk's density of reaching it.
+    pt_rev = to_area(pdf_fwd * y.q, axis, wi, dist2)
+    # qs = y_{s-1} as the camera walk would reach it from the lens point: the direction's density
+    # 1 / (A cos^3) is We lens_area cos (see pathspace.camera).
+    qs_rev = to_area(we * camera.lens_area * np.abs(camera.cos_to_axis(-wi)), y.n, wi, dist2)
+    # y_{s-2} as the camera walk would go on to it (nothing for s = 1: pdf_back and g_prev are 0 there).
+    qs_minus_rev = _at_previous(pdf_back * y.q, y)
+    return Contributions.make(y.lane, y.index + 1, 1, value, raster=raster[:, useful], qs_fwd=y.fwd, qs_rev=qs_rev,
+                              qs_minus_rev=qs_minus_rev, pt_fwd=np.full(y.size, 1.0 / camera.lens_area),
+                              pt_rev=pt_rev, flags=batch.lane_flags.take(y.lane))
+
+
+def _toward_lens(batch: Batch, y: Vertices, on_light: np.ndarray, wi: np.ndarray):
+    """What light vertices ``y`` send toward the lens along ``wi`` (f |cos|, or emission |cos|), the density
+    of that direction at y, and the density at y of the direction to y_{s-2}, light arriving from the lens."""
+    value = np.zeros((batch.colours.channels, y.size))
+    pdf_fwd, pdf_back = np.zeros(y.size), np.zeros(y.size)
+    source, surface = np.flatnonzero(on_light), np.flatnonzero(~on_light)
+    if source.size:
+        lights, ys = batch.scene.lights, y.keep(source)
+        w = np.take(wi, source, axis=1)
+        value[:, source] = lights.le(ys.entity, ys.n, w, batch.colours.take(ys.lane)) * cos_at(ys.n, w)
+        pdf_fwd[source] = lights.pdf_le(ys.entity, ys.n, w)[1]
+    if surface.size:
+        ys = y.keep(surface)
+        materials, w = batch.materials(ys), np.take(wi, surface, axis=1)
+        value[:, surface], pdf_fwd[surface] = materials.eval(_surface(ys), w)
+        pdf_back[surface] = reverse_pdf(materials, ys.n, w, ys.wo)
+    return value, pdf_fwd, pdf_back
+
+
+# -- t = 0 -----------------------------------------------------------------------------------------
+
+def lens_hits(batch: Batch) -> Contributions | None:
+    """Light-walk rays that pass through a thin lens: the lens is the path's last vertex, splatted."""
+    scene, light, hits = batch.scene, batch.light, batch.lens
+    camera = scene.camera
+    if hits is None or not hits.lane.size:
+        return None
+    # A point or spot light seen directly through the lens is not drawn (see lens_samples).
+    direct_delta = (hits.index == 1) & (batch.lane_flags.take(hits.lane) & LIGHT_DELTA).astype(bool)
+    keep = np.flatnonzero((hits.index <= batch.max_depth) & ~direct_delta)
+    lane, index, point, d = hits.lane[keep], hits.index[keep], hits.point[:, keep], hits.direction[:, keep]
+    leaving = -d.astype(np.float64)
+    raster, inside = camera.raster(point + leaving, point)
+    value = np.where(inside, hits.beta[:, keep] * camera.importance(leaving, point), 0.0)
+    useful = batch.useful(value)
+    if not useful.size:
+        return None
+    lane, index, point, leaving, value, raster = (lane[useful], index[useful], point[:, useful], leaving[:, useful],
+                                                  value[:, useful], raster[:, useful])
+    pdf, distance = hits.pdf[keep][useful], hits.distance[keep][useful].astype(np.float64)
+    y = light.at(light.offset.take(lane) + index - 1)  # the last light vertex before the lens
+    cos_lens = np.abs(camera.cos_to_axis(leaving))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        qs_fwd = pdf * cos_lens / np.where(y.infinite, 1.0, distance * distance)
+    # y_{s-2} as the camera walk would reach it from this lens point.
+    pdf_camera = camera.pdf_direction(leaving, point)
+    qs_minus_rev = np.where(y.infinite, pdf_camera, to_area(pdf_camera, y.n, leaving, distance * distance))
+    return Contributions.make(lane, index + 1, 0, value, raster=raster, qs_fwd=qs_fwd,
+                              qs_rev=np.full(lane.size, 1.0 / camera.lens_area), qs_minus_rev=qs_minus_rev,
+                              flags=batch.lane_flags.take(lane))
+
+
+# -- s, t >= 2 -------------------------------------------------------------------------------------
+
+def joins(batch: Batch):
+    """Every pair of non-delta surface vertices y_{s-1}, z_{t-1} (s, t >= 2) of a lane, joined; yields
+    :class:`Contributions` chunk by chunk (chunks never span two units)."""
+    light, eye = batch.light, batch.eye
+    cy = np.flatnonzero((light.kind == SURFACE) & ~light.delta)
+    cz = np.flatnonzero((eye.kind == SURFACE) & ~eye.delta)
+    lanes = light.offset.size - 1
+    ny = np.bincount(light.lane.take(cy), minlength=lanes)
+    nz = np.bincount(eye.lane.take(cz), minlength=lanes)
+    pairs = ny * nz
+    if not pairs.any():
+        return
+    y_start = np.concatenate([[0], np.cumsum(ny)[:-1]])
+    z_start = np.concatenate([[0], np.cumsum(nz)[:-1]])
+    pair_start = np.concatenate([[0], np.cumsum(pairs)])
+    for first, last in zip(batch.units[:-1], batch.units[1:]):
+        for begin in range(int(pair_start[first]), int(pair_start[last]), CHUNK):
+            k = np.arange(begin, min(begin + CHUNK, int(pair_start[last])))
+            lane = np.searchsorted(pair_start[:-1], k, side="right") - 1
+            # Lanes without pairs share their start with the next lane; searchsorted picks the last of them.
+            local = k - pair_start.take(lane)
+            y = cy.take(y_start.take(lane) + local // nz.take(lane))
+            z = cz.take(z_start.take(lane) + local % nz.take(lane))
+            s, t = light.index.take(y) + 1, eye.index.take(z) + 1
+            ok = s + t - 1 <= batch.max_depth
+            if not ok.all():
+                y, z = y[ok], z[ok]
+            if y.size:
+                part = _join(batch, light.at(y), eye.at(z))
+                if part is not None:
+                    yield part
+
+
+def _join(batch: Batch, y: Vertices, z: Vertices) -> Contributions | None:
+    """The connections y -> z (views of the same lanes) whose shadow rays are clear."""
+    d = z.p.astype(np.float64) - y.p
+    dist2 = dot(d, d)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = (d / np.sqrt(dist2)).astype(np.float32)  # y -> z
+    f_y, pdf_y = batch.materials(y).eval(_surface(y), w)
+    f_z, pdf_z = batch.materials(z).eval(_surface(z), -w)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        value = np.where(dist2 > 0, y.beta * f_y * f_z * z.beta / dist2, 0.0)
+    useful = batch.useful(value)
+    batch.rays += useful.size
+    blocked = segment_blocked(batch.scene, np.take(y.p, useful, axis=1), y.eps.take(useful),
+                              np.take(y.n, useful, axis=1), np.take(z.p, useful, axis=1), z.eps.take(useful),
+                              np.take(z.n, useful, axis=1))
+    useful = useful[~blocked]
+    if not useful.size:
+        return None
+    y, z, value, w, dist2 = y.keep(useful), z.keep(useful), value[:, useful], w[:, useful], dist2[useful]
+    pdf_y, pdf_z = pdf_y[useful], pdf_z[useful]
+    return Contributions.make(
+        y.lane, y.index + 1, z.index + 1, value,
+        qs_fwd=y.fwd, qs_rev=to_area(pdf_z * z.q, y.n, w, dist2),
+        qs_minus_rev=_at_previous(reverse_pdf(batch.materials(y), y.n, w, y.wo) * y.q, y),
+        pt_fwd=z.fwd, pt_rev=to_area(pdf_y * y.q, z.n, w, dist2),
+        pt_minus_rev=_at_previous(reverse_pdf(batch.materials(z), z.n, -w, z.wo) * z.q, z),
+        flags=batch.lane_flags.take(y.lane))

@@ -1,0 +1,75 @@
+"""The clock and the brakes of a render: elapsed time without pauses, pausing, and cancelling.
+
+Estimators call :meth:`RenderControl.check` between wavefront steps (a
+bounce, a subpath vertex, a batch of connections).  It returns at once while
+the render runs, waits while it is paused (the render loop pauses it while
+``on_checkpoint`` looks at the film, so that the time spent developing
+snapshots is not render time, and the work done meanwhile is small), and
+raises :class:`Interrupted` once the render has been cancelled (another
+worker failed, or the user stopped it).
+"""
+from __future__ import annotations
+
+import threading
+import time
+
+__all__ = ["Interrupted", "RenderControl"]
+
+
+class Interrupted(Exception):
+    """Raised inside a worker when its render has been cancelled."""
+
+
+class RenderControl:
+    """Elapsed render time (wall time minus pauses), pause/resume, and cancellation."""
+
+    def __init__(self) -> None:
+        self._start: float | None = None
+        self._paused_since: float | None = None
+        self._paused_total = 0.0
+        self._running = threading.Event()
+        self._running.set()
+        self._cancelled = threading.Event()
+        self.reason = ""
+
+    def start(self) -> None:
+        """Start the clock."""
+        self._start = time.perf_counter()
+
+    def elapsed(self) -> float:
+        """Seconds of rendering since :meth:`start`, pauses excluded."""
+        if self._start is None:
+            return 0.0
+        now = self._paused_since if self._paused_since is not None else time.perf_counter()
+        return now - self._start - self._paused_total
+
+    def pause(self) -> None:
+        """Stop the clock; workers wait at their next :meth:`check`."""
+        if self._paused_since is None:
+            self._paused_since = time.perf_counter()
+            self._running.clear()
+
+    def resume(self) -> None:
+        """Restart the clock and the workers."""
+        if self._paused_since is not None:
+            self._paused_total += time.perf_counter() - self._paused_since
+            self._paused_since = None
+            self._running.set()
+
+    def cancel(self, reason: str = "cancelled") -> None:
+        """Stop the render: workers raise :class:`Interrupted` at their next :meth:`check`."""
+        self.reason = reason
+        self._cancelled.set()
+        self._running.set()
+
+    @property
+    def cancelled(self) -> bool:
+        """Whether :meth:`cancel` was called."""
+        return self._cancelled.is_set()
+
+    def check(self) -> None:
+        """Called by workers between steps: wait while paused, raise :class:`Interrupted` if cancelled."""
+        if not self._running.is_set():
+            self._running.wait()
+        if self._cancelled.is_set():
+            raise Interrupted(self.reason)

@@ -1,0 +1,159 @@
+"""The default render loop: passes x tiles, on worker threads, results to the film in item order.
+
+A render of ``spp`` samples per pixel is ``spp`` passes over the image.  Work
+items hold at most about ``tile_pixels`` lanes: a tile of a large image, or
+several passes of a small one (:func:`work_layout`); each (pass, tile) unit
+has its own random streams (see :mod:`pathspace.sampler`).  One worker thread
+per core runs the estimator's ``render_items`` on its own wavefront, taking
+items as it needs them -- NumPy and Embree release the GIL in their inner
+loops -- and the main thread hands results to the film in item order, so the
+same seed gives the bit-identical image whatever the thread count.  Items
+never straddle a checkpoint given in passes, and a checkpoint in seconds
+falls between two items, so every checkpoint sees whole passes.
+"""
+from __future__ import annotations
+
+import threading
+from typing import Callable, Iterator
+
+from .base import Budget, Checkpoint, Counters, ItemResult, RenderJob, WorkItem
+from .control import Interrupted
+
+__all__ = ["render_passes", "work_layout"]
+
+
+def work_layout(pixel_count: int, passes: int | None, workers: int, tile_pixels: int) -> tuple[int, int]:
+    """(tile size in pixels, passes per work item) for an image of ``pixel_count`` pixels, in items of
+    about ``tile_pixels`` lanes.
+
+    Small images pack several passes into an item, but no more than keeps
+    every worker busy when the number of ``passes`` is known.  The grouping
+    changes neither the random streams nor the order in which samples reach
+    the film.
+    """
+    tiles = -(-pixel_count // tile_pixels)
+    tile = -(-pixel_count // tiles)
+    if tiles > 1:
+        return tile, 1
+    per_item = max(1, tile_pixels // pixel_count)
+    if passes is not None:
+        per_item = min(per_item, max(1, -(-passes // (2 * workers))))
+    return tile, per_item
+
+
+def _pass_groups(passes: Iterator[int], size: int, first: int, breaks: set[int]) -> Iterator[range]:
+    """Consecutive passes in groups of at most ``size``; a group also ends after pass ``first + b - 1``
+    for every b in ``breaks`` (so that checkpoints fall between groups)."""
+    group: list[int] = []
+    for p in passes:
+        group.append(p)
+        if len(group) == size or p - first + 1 in breaks:
+            yield range(group[0], group[-1] + 1)
+            group = []
+    if group:
+        yield range(group[0], group[-1] + 1)
+
+
+def _work_items(job: RenderJob, budget: Budget, tile: int, per_item: int) -> Iterator[WorkItem]:
+    """Work items in order: passes until the budget is spent, each group of passes tile by tile."""
+    control, pixel_count = job.control, job.film.pixel_count
+
+    def passes() -> Iterator[int]:
+        p = 0
+        while ((budget.spp is not None and p < budget.spp)
+               or (budget.seconds is not None and (p == 0 or control.elapsed() < budget.seconds))):
+            yield budget.first_pass + p
+            p += 1
+
+    breaks = {int(c) for c in budget.checkpoints} if budget.checkpoint_unit == "spp" else set()
+    index = 0
+    for group in _pass_groups(passes(), per_item, budget.first_pass, breaks):
+        for start in range(0, pixel_count, tile):
+            yield WorkItem(index, group, start // tile, start, min(start + tile, pixel_count))
+            index += 1
+
+
+class _Checkpoints:
+    """Fires ``on_checkpoint`` once the film has reached each checkpoint, with the clock paused."""
+
+    def __init__(self, budget: Budget, job: RenderJob, on_checkpoint: Callable[[Checkpoint], None] | None) -> None:
+        self.pending = sorted(budget.checkpoints) if on_checkpoint is not None else []
+        self.unit, self.job, self.callback = budget.checkpoint_unit, job, on_checkpoint
+
+    def update(self) -> None:
+        film, control = self.job.film, self.job.control
+        reached = film.passes if self.unit == "spp" else control.elapsed()
+        if not self.pending or self.pending[0] > reached or film.incomplete_passes or not film.passes:
+            return
+        while self.pending and self.pending[0] <= reached:
+            self.pending.pop(0)
+        control.pause()
+        try:
+            self.callback(Checkpoint(film.passes, control.elapsed(), film))
+        finally:
+            control.resume()
+
+
+def render_passes(estimator, job: RenderJob, budget: Budget,
+                  on_checkpoint: Callable[[Checkpoint], None] | None = None) -> None:
+    """Render ``budget`` with ``estimator.render_items`` on ``job.threads`` workers into ``job.film``."""
+    film, control = job.film, job.control
+    tile, per_item = work_layout(film.pixel_count, budget.spp, job.threads, estimator.tile_pixels)
+    items = _work_items(job, budget, tile, per_item)
+    lock, done = threading.Lock(), threading.Condition()
+    results: dict[int, ItemResult] = {}
+    failures: list[BaseException] = []
+    counters = [Counters() for _ in range(job.threads)]
+    running = [job.threads]
+
+    def next_item() -> WorkItem | None:
+        control.check()
+        with lock:
+            return next(items, None)
+
+    def work(k: int) -> None:
+        try:
+            for result in estimator.render_items(job, next_item, counters[k]):
+                with done:
+                    results[result.item.index] = result
+                    done.notify()
+        except Interrupted:
+            pass
+        except BaseException as error:  # handed to the main thread
+            failures.append(error)
+            control.cancel(f"a worker failed: {error!r}")
+        finally:
+            with done:
+                running[0] -= 1
+                done.notify()
+
+    workers = [threading.Thread(target=work, args=(k,), daemon=True) for k in range(job.threads)]
+    for w in workers:
+        w.start()
+    checkpoints = _Checkpoints(budget, job, on_checkpoint)
+    expected = 0
+    try:
+        while True:
+            with done:
+                while expected not in results and running[0] and not failures:
+                    done.wait()
+                if failures or expected not in results:
+                    break
+                result = results.pop(expected)
+            expected += 1
+            before = film.passes
+            result.deliver(film)
+            if job.progress is not None and film.passes > before:
+                job.progress.update(film.passes - before)
+            checkpoints.update()
+    except BaseException:
+        control.cancel("interrupted")
+        raise
+    finally:
+        for w in workers:
+            w.join()
+        for c in counters:
+            job.counters.merge(c)
+    if failures:
+        raise failures[0]
+    film.discard_incomplete()

@@ -1,0 +1,404 @@
+"""Camera and light subpaths for bidirectional estimators, generated over wavefronts.
+
+Each lane of a batch grows one subpath by the shared random walk
+(:mod:`pathspace.estimators.walk`; Veach 1997, ch. 10; pbrt-v3's
+GenerateCameraSubpath / GenerateLightSubpath).  Vertex i of a subpath
+records where it is, the throughput ``beta`` of the subpath up to it
+(excluding its own scattering), and two densities in area measure:
+
+``fwd``  the density with which this walk generated it (from vertex i-1),
+``rev``  the density with which a walk in the opposite direction would have
+         generated it (from vertex i+1), filled in once vertex i+1 has
+         sampled its direction.
+
+Both include the Russian-roulette survival probability ``q`` of the vertex
+they are generated from when the policy is *local* (a property of the
+material and depth at the vertex, not of the walk: the same in both
+directions, as in SmallVCM), so that multiple importance sampling sees the
+real densities and the reverse densities can be stored once; see
+:mod:`pathspace.roulette`.  Densities at points at infinity (the
+environment) are in solid angle; the density of a vertex generated from
+infinity is the density on the disk the rays start from, projected (times
+|cos| at the vertex).  Delta (specular) vertices carry density 0 toward
+their neighbours.
+
+Vertices of all lanes are stored flat, lane after lane, with CSR offsets, so
+that connections gather any (lane, vertex) pair in one array operation
+(:meth:`Subpaths.at` gives a view of chosen vertices).  Camera walks that
+leave the scene end in a vertex at infinity when there is an environment
+(the s = 0 strategy finds it there); light walks report the rays that pass
+through a thin lens (the t = 0 strategy).  Every vertex also carries the
+uniforms its connections will use (``u``: a light sample's 3 for camera
+vertices, a lens sample's 2 for light vertices), drawn with it, so a lane's
+random numbers depend on nothing else in the batch.  The numbers each walk
+draws are :data:`CAMERA_START`, :data:`LIGHT_START`, :data:`CAMERA_VERTEX`
+and :data:`LIGHT_VERTEX`.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..bsdfs import MaterialLanes, Surface
+from ..roulette import RussianRoulette
+from ..vecmath import dot
+from .base import Counters
+from .control import RenderControl
+from .walk import WALK_FIELDS, Arrival, Dimensions, Walk
+from .wavefront import Lanes
+
+__all__ = ["Subpaths", "Vertices", "LensHits", "SubpathSettings", "SURFACE", "CAMERA", "LIGHT", "SAFETY_VERTICES",
+           "CAMERA_START", "LIGHT_START", "CAMERA_VERTEX", "LIGHT_VERTEX", "camera_subpaths", "light_subpaths",
+           "to_area", "cos_at", "reverse_pdf"]
+
+SURFACE, CAMERA, LIGHT = 0, 1, 2
+# Subpaths still growing at this many vertices are cut (and counted): only lossless traps get there.
+SAFETY_VERTICES = 10_000
+FIELDS = ("lane", "index", "p", "n", "eps", "wo", "beta", "fwd", "rev", "g_prev", "delta", "kind", "material",
+          "entity", "q", "infinite", "u")
+# The numbers drawn: at the lens (film position, lens point), at the light (light choice, point and
+# direction; the lens sample that joins vertex 0 to the camera), and per vertex (the BSDF sample, the
+# roulette, and what this vertex's connections use: a light sample, or a lens sample).
+CAMERA_START = Dimensions(pixel=2, lens=2)
+LIGHT_START = Dimensions(emission=5, connect=2)
+CAMERA_VERTEX = Dimensions(bsdf=3, roulette=1, connect=3)
+LIGHT_VERTEX = Dimensions(bsdf=3, roulette=1, connect=2)
+_WALK_FIELDS = WALK_FIELDS + ("lane", "q", "prev_n", "prev_infinite")
+
+
+def cos_at(normal: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """|cos| between unit ``w`` and normals (3, N); 1 where the normal is zero (point lights)."""
+    return np.where((normal != 0).any(axis=0), np.abs(dot(normal, w)).astype(np.float64), 1.0)
+
+
+def to_area(pdf_sa: np.ndarray, normal: np.ndarray, w: np.ndarray, dist2: np.ndarray) -> np.ndarray:
+    """Solid-angle densities turned into area densities at targets a distance sqrt(dist2) away along unit
+    ``w``: pdf |cos| / d^2 with cos between ``w`` and the target's ``normal`` (a zero normal -- a point
+    light -- has no cosine factor; Veach 1997, eq. 8.10)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(dist2 > 0, pdf_sa * cos_at(normal, w) / dist2, 0.0)
+
+
+def reverse_pdf(materials: MaterialLanes, n: np.ndarray, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
+    """Solid-angle density with which the materials sample ``wo`` when light arrives from ``wi`` (the
+    walk in the opposite direction); ``n`` geometric normals."""
+    return materials.eval(Surface.facing(n, -wi), wo)[1]
+
+
+@dataclass
+class Subpaths:
+    """Vertices of one kind of subpath (camera or light) for a batch of lanes, flat with CSR offsets.
+
+    Per vertex: ``lane``, ``index`` (position in its subpath), ``p``, ``n``
+    (geometric normal; an area light's normal; the lens axis; the direction
+    of travel at infinity; zero for point and spot lights), ``eps`` (ray
+    offset of its surface), ``wo`` (unit direction toward the previous
+    vertex), ``beta`` (C, V), ``fwd``, ``rev``, ``delta``, ``kind`` (SURFACE,
+    CAMERA, LIGHT), ``material`` (-1 off surfaces), ``entity`` (the light
+    entity of light vertices and of surface vertices on emitters, else -1),
+    ``q`` (survival probability as MIS sees it), ``infinite``, ``u`` (its
+    connections' uniforms), ``g_prev`` (what turns a solid-angle density of
+    leaving the vertex toward its predecessor into an area density there:
+    |cos| / d^2 at the predecessor, |cos| alone from a vertex at infinity, 1
+    toward one).  ``terminated`` (lanes,): a dispersive interface kept only
+    the hero wavelength somewhere on the lane's subpath.
+    """
+
+    offset: np.ndarray
+    lane: np.ndarray
+    index: np.ndarray
+    p: np.ndarray
+    n: np.ndarray
+    eps: np.ndarray
+    wo: np.ndarray
+    beta: np.ndarray
+    fwd: np.ndarray
+    rev: np.ndarray
+    g_prev: np.ndarray
+    delta: np.ndarray
+    kind: np.ndarray
+    material: np.ndarray
+    entity: np.ndarray
+    q: np.ndarray
+    infinite: np.ndarray
+    u: np.ndarray
+    terminated: np.ndarray
+
+    @property
+    def length(self) -> np.ndarray:
+        """Vertices per lane."""
+        return np.diff(self.offset)
+
+    @property
+    def count(self) -> int:
+        """Vertices in all."""
+        return int(self.offset[-1])
+
+    def at(self, v: np.ndarray) -> "Vertices":
+        """A view of vertices ``v`` (flat indices)."""
+        return Vertices(self, v)
+
+
+class Vertices:
+    """Vertices ``v`` of a :class:`Subpaths`: every per-vertex field (``p``, ``beta``, ``fwd``, ...) is gathered
+    at ``v`` on first use; ``keep`` narrows the view."""
+
+    def __init__(self, subpaths: Subpaths, v: np.ndarray) -> None:
+        self.subpaths = subpaths
+        self.v = v
+
+    @property
+    def size(self) -> int:
+        """Number of vertices in the view."""
+        return int(self.v.size)
+
+    def __getattr__(self, name: str) -> np.ndarray:
+        if name not in FIELDS:
+            raise AttributeError(name)
+        value = np.take(getattr(self.subpaths, name), self.v, axis=-1)
+        self.__dict__[name] = value
+        return value
+
+    def keep(self, k: np.ndarray) -> "Vertices":
+        """The vertices at positions ``k`` of this view (fields already gathered come along)."""
+        view = Vertices(self.subpaths, self.v.take(k))
+        for name in FIELDS:
+            if name in self.__dict__:
+                view.__dict__[name] = np.take(self.__dict__[name], k, axis=-1)
+        return view
+
+
+@dataclass
+class LensHits:
+    """Light-walk rays that pass through a thin lens: the lens would be vertex ``index`` of the subpath.
+
+    ``point`` (3, H) float64 on the lens; ``direction`` (3, H) of the ray;
+    ``beta`` (C, H) throughput arriving; ``pdf`` (H,) solid-angle density of
+    the direction (with q), or the disk density after an infinite light;
+    ``distance`` (H,) from the previous vertex (unused after infinite ones).
+    """
+
+    lane: np.ndarray
+    index: np.ndarray
+    point: np.ndarray
+    direction: np.ndarray
+    beta: np.ndarray
+    pdf: np.ndarray
+    distance: np.ndarray
+
+    @classmethod
+    def concatenate(cls, parts: list[dict], channels: int) -> "LensHits":
+        if not parts:
+            return cls(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((3, 0)), np.zeros((3, 0), np.float32),
+                       np.zeros((channels, 0)), np.zeros(0), np.zeros(0))
+        return cls(**{name: np.concatenate([part[name] for part in parts], axis=-1) for name in parts[0]})
+
+
+@dataclass
+class SubpathSettings:
+    """What the subpath walks of a batch share."""
+
+    scene: object
+    colours: object
+    options: dict
+    roulette: RussianRoulette
+    max_vertices: int
+    counters: Counters
+    control: RenderControl
+
+
+class _Recorder:
+    """Vertices collected depth by depth (records of the lanes that have them), flattened at the end."""
+
+    def __init__(self) -> None:
+        self.records: list[dict[str, np.ndarray]] = []
+
+    def add(self, lanes, index, p, n, eps, wo, beta, fwd, g_prev, kind, material, entity, q, infinite, u,
+            delta) -> dict:
+        count = lanes.size
+        record = dict(lane=lanes, index=np.full(count, index, dtype=np.int64), p=p, n=n, eps=eps, wo=wo, beta=beta,
+                      fwd=fwd, rev=np.zeros(count), g_prev=g_prev, delta=delta,
+                      kind=np.full(count, kind, dtype=np.int8), material=material, entity=entity, q=q,
+                      infinite=infinite, u=u)
+        self.records.append(record)
+        return record
+
+    def flatten(self, lanes: int, terminated: np.ndarray) -> Subpaths:
+        # Records hold vertices depth by depth; a stable sort by lane puts them lane by lane, in depth order.
+        lane = np.concatenate([record["lane"] for record in self.records])
+        order = np.argsort(lane, kind="stable")
+        offset = np.concatenate([[0], np.cumsum(np.bincount(lane, minlength=lanes))]).astype(np.int64)
+        fields = {name: np.concatenate([record[name] for record in self.records], axis=-1).take(order, axis=-1)
+                  for name in FIELDS}
+        return Subpaths(offset=offset, terminated=terminated, **fields)
+
+
+class _Growth:
+    """Subpaths growing by the shared walk from vertex 1 on, recording every vertex."""
+
+    def __init__(self, settings: SubpathSettings, walk: Walk, recorder: _Recorder, record: dict, lanes: int) -> None:
+        self.settings, self.walk, self.recorder, self.previous = settings, walk, recorder, record
+        self.terminated = np.zeros(lanes, bool)
+        self.lens_hits: list[dict] | None = None   # light walks through a thin lens: rays that hit it
+        self.escapes = False                       # camera walks with an environment: vertices at infinity
+
+    def run(self) -> None:
+        """Walk until every subpath has ended or reached ``max_vertices``."""
+        walk, settings = self.walk, self.settings
+        while walk.size and int(walk.lanes.depth[0]) + 1 < settings.max_vertices:
+            settings.control.check()
+            hits = walk.trace()
+            hit = hits.prim >= 0
+            if self.lens_hits is not None:
+                self._through_lens(hits.t)
+            if self.escapes and not hit.all():
+                self._at_infinity(np.flatnonzero(~hit))
+            prim, b1, b2, t = hits.prim, hits.u, hits.v, hits.t
+            if not hit.all():
+                prim, b1, b2, t = walk.keep(np.flatnonzero(hit), prim, b1, b2, t)
+                if not walk.size:
+                    break
+            if not self._vertex(walk.arrive(prim, b1, b2, t)):
+                break
+
+    def _mis_pdf(self) -> np.ndarray:
+        """The density, as MIS sees it, of the current direction (0 after a delta lobe, with q)."""
+        lanes = self.walk.lanes
+        return np.where(lanes.delta, 0.0, lanes.pdf) * lanes.q
+
+    def _vertex(self, arrival: Arrival) -> bool:
+        """Record the vertex reached, sample the next direction there, and roulette (False: the walks stop)."""
+        walk, settings = self.walk, self.settings
+        lanes, table = walk.lanes, settings.scene.materials
+        index = int(lanes.depth[0])
+        dist2 = arrival.t.astype(np.float64) ** 2
+        with np.errstate(divide="ignore", invalid="ignore"):
+            fwd = self._mis_pdf() * np.abs(arrival.cos).astype(np.float64) / np.where(lanes.prev_infinite, 1.0, dist2)
+            g_prev = np.where(lanes.prev_infinite, 1.0, cos_at(lanes.prev_n, lanes.direction) / dist2)
+        u = walk.draw()
+        q = walk.mis_survival(arrival)
+        emitter = settings.scene.lights.area.emitter_of_triangle
+        record = self.recorder.add(lanes.lane, index, arrival.p, arrival.normal, arrival.eps, -lanes.direction,
+                                   lanes.beta, fwd, g_prev, SURFACE, arrival.material.astype(np.int64),
+                                   emitter.take(arrival.prim), q, np.zeros(walk.size, bool), u.connect,
+                                   table.delta.take(arrival.material))
+        if index + 1 >= settings.max_vertices:
+            if settings.max_vertices >= SAFETY_VERTICES:
+                settings.counters.truncated += walk.size
+            return False
+        materials = MaterialLanes(table, arrival.material, settings.colours.take(lanes.lane), settings.options)
+        sample = materials.sample(arrival.surface, u.bsdf, walk.transport)
+        # The previous vertex as the opposite walk would generate it from here (Veach 1997, eq. 10.7).
+        pdf_back = np.where(sample.delta, 0.0, reverse_pdf(materials, arrival.normal, sample.wi, -lanes.direction)) * q
+        self.previous["rev"][np.searchsorted(self.previous["lane"], lanes.lane)] = pdf_back * g_prev
+        if sample.terminated is not None:
+            self.terminated[lanes.lane[sample.terminated]] = True
+        survival = walk.survival(arrival, sample.weight)
+        alive = walk.scatter(arrival, sample, u.roulette, survival)
+        lanes.prev_n, lanes.prev_infinite = arrival.normal, np.zeros(walk.size, bool)
+        self.previous = record
+        if not alive.all():
+            walk.keep(np.flatnonzero(alive))
+        return True
+
+    def _through_lens(self, t_hit: np.ndarray) -> None:
+        """Note the rays that pass through a thin lens before hitting anything."""
+        lanes = self.walk.lanes
+        t_lens, on_lens = self.settings.scene.camera.intersect_lens(lanes.origin, lanes.direction)
+        on_lens &= (t_lens < t_hit) & (t_lens > lanes.tmin)
+        k = np.flatnonzero(on_lens)
+        if k.size:
+            d = np.take(lanes.direction, k, axis=1)
+            self.lens_hits.append(dict(
+                lane=lanes.lane.take(k), index=np.full(k.size, int(lanes.depth[0]), dtype=np.int64),
+                point=np.take(lanes.origin, k, axis=1).astype(np.float64) + d * t_lens.take(k), direction=d,
+                beta=np.take(lanes.beta, k, axis=1), pdf=self._mis_pdf().take(k), distance=t_lens.take(k)))
+
+    def _at_infinity(self, k: np.ndarray) -> None:
+        """Record the rays ``k`` that left the scene as vertices at infinity on the environment."""
+        lanes = self.walk.lanes
+        count = k.size
+        d = np.take(lanes.direction, k, axis=1)
+        self.recorder.add(lanes.lane.take(k), int(lanes.depth[0]), np.take(lanes.origin, k, axis=1), d,
+                          np.zeros(count, np.float32), -d, np.take(lanes.beta, k, axis=1), self._mis_pdf().take(k),
+                          cos_at(np.take(lanes.prev_n, k, axis=1), d), LIGHT, np.full(count, -1, np.int64),
+                          np.full(count, self.settings.scene.lights.environment_entity, np.int64), np.ones(count),
+                          np.ones(count, bool), np.zeros((CAMERA_VERTEX.sizes["connect"], count)),
+                          np.zeros(count, bool))
+
+
+def _walk_lanes(count: int, origin, direction, beta, pdf, normal, infinite, tmin, **extra) -> Lanes:
+    """Walk state leaving vertex 0 (``normal``, ``infinite``) along ``direction`` with density ``pdf``."""
+    return Lanes(_WALK_FIELDS + tuple(extra), depth=np.zeros(count, np.int32), origin=origin, direction=direction,
+                 tmin=tmin, beta=beta, pdf=pdf, delta=np.zeros(count, bool), lane=np.arange(count), q=np.ones(count),
+                 prev_n=normal, prev_infinite=infinite, **extra)
+
+
+def camera_subpaths(settings: SubpathSettings, pixels: np.ndarray, sampler) -> Subpaths:
+    """Camera subpaths through ``pixels``, one lane each, from ``sampler``'s numbers.
+
+    Vertex 0 is the lens point (density 1 / lens area; a pinhole's is a delta
+    and is given 1), with throughput 1: the pixel value is the average
+    radiance arriving through the pixel (We cos / (p_pos p_dir) = 1).
+    """
+    scene, channels = settings.scene, settings.colours.channels
+    camera = scene.camera
+    count = pixels.size
+    u = CAMERA_START.split(sampler.draw(CAMERA_START.size))
+    origin, direction = camera.generate_rays(pixels, u.pixel, u.lens)
+    origin = np.ascontiguousarray(origin, dtype=np.float32)
+    axis = np.repeat(camera.forward.astype(np.float32)[:, None], count, axis=1)
+    recorder = _Recorder()
+    record = recorder.add(np.arange(count), 0, origin, axis, np.zeros(count, np.float32),
+                          np.zeros((3, count), np.float32), np.ones((channels, count)),
+                          np.full(count, 1.0 / camera.lens_area), np.zeros(count), CAMERA, np.full(count, -1, np.int64),
+                          np.full(count, -1, np.int64), np.ones(count), np.zeros(count, bool),
+                          np.zeros((CAMERA_VERTEX.sizes["connect"], count)), np.zeros(count, bool))
+    lanes = _walk_lanes(count, origin, direction, np.ones((channels, count)), camera.pdf_direction(direction, origin),
+                        axis, np.zeros(count, bool), np.zeros(count, np.float32))
+    growth = _Growth(settings, Walk(scene, lanes, sampler, settings.roulette, CAMERA_VERTEX), recorder, record, count)
+    growth.escapes = scene.lights.environment is not None
+    growth.run()
+    settings.counters.rays += growth.walk.rays
+    return recorder.flatten(count, growth.terminated)
+
+
+def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool) -> tuple[Subpaths, LensHits]:
+    """``count`` light subpaths, one per lane, from ``sampler``'s numbers: (subpaths, lens hits).
+
+    Vertex 0 is on a light chosen by power, with the origin density of
+    :meth:`pathspace.lights.LightSet.pdf_le` and throughput 1 / (pmf x
+    positional density) -- what a connection from it to the camera needs;
+    the ray leaving it carries Le |cos| / (pmf p_pos p_dir).  ``lens``: look
+    for rays through a thin lens.
+    """
+    scene, colours = settings.scene, settings.colours
+    lights = scene.lights
+    u = LIGHT_START.split(sampler.draw(LIGHT_START.size))
+    e = lights.sample_le(u.emission, colours, "power")
+    with np.errstate(divide="ignore", invalid="ignore"):
+        beta0 = np.where(e.pdf_pos > 0, 1.0 / e.pdf_pos, 0.0)
+        beta = e.value * np.where(e.pdf_dir > 0, beta0 * e.cos_light / e.pdf_dir, 0.0)
+    recorder = _Recorder()
+    record = recorder.add(np.arange(count), 0, e.point.astype(np.float32), e.normal, e.epsilon,
+                          np.zeros((3, count), np.float32), np.repeat(beta0[None, :], colours.channels, axis=0),
+                          lights.pdf_le(e.entity, e.normal, e.direction)[0], np.zeros(count), LIGHT,
+                          np.full(count, -1, np.int64), e.entity.astype(np.int64), np.ones(count), e.infinite,
+                          u.connect, np.zeros(count, bool))
+    # From a light at infinity the next vertex's density is the disk density, projected at the hit.
+    pmf = lights.pmf("power").take(e.entity)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pdf = np.where(e.infinite, e.pdf_pos / pmf, e.pdf_dir)
+    extra = {}
+    if settings.roulette.policy == "throughput":  # the throughput is measured relative to the ray leaving the light
+        start = beta.max(axis=0)
+        extra["rr_scale"] = np.divide(1.0, start, out=np.zeros_like(start), where=start > 0)
+    lanes = _walk_lanes(count, e.point.astype(np.float32), e.direction, beta, pdf, e.normal, e.infinite, e.tmin,
+                        **extra)
+    growth = _Growth(settings, Walk(scene, lanes, sampler, settings.roulette, LIGHT_VERTEX, "importance"), recorder,
+                     record, count)
+    growth.lens_hits = [] if lens else None
+    growth.run()
+    settings.counters.rays += growth.walk.rays
+    return recorder.flatten(count, growth.terminated), LensHits.concatenate(growth.lens_hits or [], colours.channels)

@@ -1,0 +1,176 @@
+"""The random walk every estimator takes: trace, arrive, sample the BSDF, roulette, move on.
+
+Path tracing's camera paths and the camera and light subpaths of light
+tracing and BDPT are the same process (Veach 1997, sec. 10.2): from a point
+and a direction, find the next surface, sample a direction there from its
+BSDF, decide by Russian roulette whether to go on, and carry the throughput
+beta = prod f |cos| / (pdf q).  A :class:`Walk` holds the live lanes of such
+walks (a :class:`~pathspace.estimators.wavefront.Lanes` with at least the
+fields of :data:`WALK_FIELDS`) and their sampler, and offers those steps;
+the estimators do their own work between them (emission and next-event
+estimation for the path tracer; recording vertices and their reverse
+densities for subpaths):
+
+``u = walk.draw()``                    this vertex's numbers, by name (a :class:`Dimensions` layout)
+``hits = walk.trace()``                the closest hits of the current rays (depth + 1)
+``kept = walk.keep(idx, *arrays)``     only lanes ``idx`` stay (state, sampler, and ``arrays``)
+``hit = walk.arrive(hits)``            the surface points reached (:class:`Arrival`)
+``alive = walk.scatter(hit, ...)``     throughput, roulette, and the next ray from a BSDF sample
+
+Per lane (``WALK_FIELDS``): ``depth`` segments traced, ``origin`` (3, N)
+float32 and ``direction`` (3, N) float32 unit of the current ray, which
+starts ``tmin`` along it (see :func:`pathspace.vecmath.leave_distance`);
+``beta`` (C, N) float64 throughput; ``pdf`` (N,) the solid-angle density of
+the current direction (of a delta lobe: its discrete probability); ``delta``
+whether it was a delta lobe; and, for walks whose vertex densities matter
+(subpaths), ``q``: the survival probability the roulette gave at the vertex
+the ray left, as multiple importance sampling sees it (1 for policies that
+are not local, see :mod:`pathspace.roulette`).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from types import SimpleNamespace
+
+import numpy as np
+
+from ..bsdfs import BSDFSample, Surface
+from ..roulette import RussianRoulette
+from ..vecmath import dot, leave_distance
+from .wavefront import Lanes
+
+__all__ = ["WALK_FIELDS", "Arrival", "Dimensions", "Walk"]
+
+WALK_FIELDS = ("depth", "origin", "direction", "tmin", "beta", "pdf", "delta")
+
+
+class Dimensions:
+    """How many uniform numbers a walk draws per vertex, by name, in the order drawn.
+
+    ``Dimensions(light=3, bsdf=3, roulette=1)`` draws 7 numbers per vertex;
+    :meth:`split` names their rows.
+    """
+
+    def __init__(self, **sizes: int) -> None:
+        self.sizes = dict(sizes)
+        self.size = sum(self.sizes.values())
+
+    def split(self, u: np.ndarray) -> SimpleNamespace:
+        """The rows of ``u`` (size, N) by name."""
+        parts, start = {}, 0
+        for name, size in self.sizes.items():
+            parts[name] = u[start:start + size]
+            start += size
+        return SimpleNamespace(**parts)
+
+    def __add__(self, other: "Dimensions") -> "Dimensions":
+        return Dimensions(**self.sizes, **other.sizes)
+
+
+@dataclass
+class Arrival:
+    """Where the current rays hit surfaces: ``prim`` (N,) triangles, ``t`` distances, points ``p`` and unit
+    geometric normals ``normal`` (3, N) float32, ray offsets ``eps``, ``cos`` = dot(normal, -direction)
+    (N,) float32 and ``direction`` (3, N) of arrival."""
+
+    prim: np.ndarray
+    t: np.ndarray
+    p: np.ndarray
+    normal: np.ndarray
+    eps: np.ndarray
+    cos: np.ndarray
+    direction: np.ndarray
+    material: np.ndarray
+
+    @cached_property
+    def surface(self) -> Surface:
+        """The shading frame seen from the arriving ray."""
+        return Surface.facing(self.normal, self.direction, self.cos)
+
+    def keep(self, indices: np.ndarray) -> "Arrival":
+        """The arrivals of lanes ``indices``."""
+        return Arrival(*(np.take(getattr(self, name), indices, axis=-1) for name in
+                         ("prim", "t", "p", "normal", "eps", "cos", "direction", "material")))
+
+
+class Walk:
+    """Live lanes of random walks through ``scene``, their sampler, and the steps they take.
+
+    ``dims``: the numbers drawn per vertex (with ``bsdf`` (3) and
+    ``roulette`` (1) among them); ``transport``: "radiance" for walks from
+    the camera, "importance" for walks from lights (refraction differs);
+    ``rr_scale`` (N,) or None: what the roulette multiplies the throughput by
+    before reading it (the inverse of a light subpath's starting throughput).
+    """
+
+    def __init__(self, scene, lanes: Lanes, sampler, roulette: RussianRoulette, dims: Dimensions,
+                 transport: str = "radiance") -> None:
+        self.scene, self.lanes, self.sampler = scene, lanes, sampler
+        self.roulette, self.dims, self.transport = roulette, dims, transport
+        self.rays = 0
+
+    @property
+    def size(self) -> int:
+        """Number of live lanes."""
+        return self.lanes.size
+
+    def draw(self) -> SimpleNamespace:
+        """This vertex's uniform numbers for every live lane, by name (see :class:`Dimensions`)."""
+        return self.dims.split(self.sampler.draw(self.dims.size))
+
+    def trace(self):
+        """Closest hits (:class:`pathspace.accel.Hits`) of the current rays; depth grows by one segment."""
+        lanes = self.lanes
+        lanes.depth += 1
+        self.rays += lanes.size
+        return self.scene.accel.intersect(lanes.origin, lanes.direction, lanes.tmin, normals=False, threads=1)
+
+    def keep(self, indices: np.ndarray, *arrays: np.ndarray, stale: tuple[str, ...] = ()):
+        """Keep only lanes ``indices`` (increasing): their state, their sampler, and the per-lane ``arrays``
+        (last axis), which are returned compacted.  Fields named in ``stale`` are dropped (the caller
+        replaces them)."""
+        self.lanes.keep(indices, stale)
+        self.sampler.keep(indices)
+        return tuple(np.take(a, indices, axis=-1) for a in arrays)
+
+    def arrive(self, prim: np.ndarray, b1: np.ndarray, b2: np.ndarray, t: np.ndarray) -> Arrival:
+        """The surface points of hits on triangles ``prim`` at barycentrics ``b1``, ``b2``, distance ``t``."""
+        p, normal, eps = self.scene.mesh.hit_geometry(prim, b1, b2)
+        direction = self.lanes.direction
+        return Arrival(prim, t, p, normal, eps, -dot(normal, direction), direction, self.scene.mesh.material.take(prim))
+
+    def survival(self, hit: Arrival, weight: np.ndarray) -> np.ndarray | None:
+        """Roulette's survival probabilities at ``hit`` for sample weights ``weight`` (C, N), or None."""
+        roulette = self.roulette
+        throughput = None
+        if roulette.policy == "throughput":
+            throughput = self.lanes.beta * weight
+            if "rr_scale" in self.lanes.fields:
+                throughput = throughput * self.lanes.rr_scale
+        return roulette.survival(self.lanes.depth, throughput, self.scene.materials.albedo.take(hit.material))
+
+    def mis_survival(self, hit: Arrival) -> np.ndarray:
+        """q at ``hit`` as multiple importance sampling sees it (N,): the survival probability of a local
+        roulette policy, 1 for others (see :mod:`pathspace.roulette`)."""
+        q = self.survival(hit, None) if self.roulette.local else None
+        return np.ones(self.size) if q is None else q
+
+    def scatter(self, hit: Arrival, sample: BSDFSample, u_roulette: np.ndarray,
+                survival: np.ndarray | None) -> np.ndarray:
+        """Leave ``hit`` along ``sample``: throughput times its weight over the ``survival`` probability
+        (None: 1; decided by ``u_roulette`` (1, N)), the sample's direction and density, q for MIS (if
+        the lanes keep a ``q``).  Returns a mask of the lanes that go on
+        (not absorbed, not terminated by roulette); the caller keeps them."""
+        lanes = self.lanes
+        alive = sample.weight.max(axis=0) > 0
+        lanes.beta = lanes.beta * sample.weight
+        if survival is not None:
+            alive &= u_roulette[0] < survival
+            np.divide(lanes.beta, survival, out=lanes.beta, where=survival > 0)
+        if "q" in lanes.fields:
+            lanes.q = survival if survival is not None and self.roulette.local else np.ones(lanes.size)
+        lanes.pdf, lanes.delta, lanes.direction = sample.pdf, sample.delta, sample.wi
+        lanes.origin = hit.p
+        lanes.tmin = leave_distance(hit.eps, dot(hit.normal, sample.wi))
+        return alive
