@@ -5,6 +5,7 @@
     result = ps.render(scene, estimator="pt", spp=64, seed=1)
     result.image, result.variance, result.stats
 """
+from . import estimators, integrators  # integrators: the old name of estimators, pointing to the new names
 from ._native import default_thread_count
 from .accel import Accel, Hits
 from .film import Film

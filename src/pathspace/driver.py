@@ -18,6 +18,7 @@ import numpy as np
 
 from . import _native
 from .checks import integer, number
+from .diagnostics import path_length_warnings, second_moment_share, second_moment_warnings
 from .estimators import Estimator, make_estimator
 from .estimators.base import Budget, Checkpoint, RenderJob
 from .estimators.control import RenderControl
@@ -35,6 +36,8 @@ __all__ = ["render", "RenderResult"]
 MMAP_THRESHOLD = 32 << 20
 TRIM_THRESHOLD = 256 << 20
 _allocator_tuned = False
+CLOCK = "render time: from the first work item to the last (scene loading and BVH builds excluded; checkpoints paused)"
+DEFAULT_SPP = 16  # samples per pixel when neither the call nor the scene's [render] table says
 _STRATEGY_LAYER = re.compile(r"s(\d+)t(\d+)\.(weighted|unweighted)")
 
 
@@ -67,7 +70,6 @@ class RenderResult:
     stats: dict[str, Any]
     film: Film = field(repr=False)
     xyz: np.ndarray | None = field(default=None, repr=False)
-    to_srgb: np.ndarray | None = field(default=None, repr=False)
 
     @cached_property
     def strategies(self) -> dict | None:
@@ -78,7 +80,7 @@ class RenderResult:
             match = _STRATEGY_LAYER.fullmatch(name)
             if match:
                 s, t, kind = int(match[1]), int(match[2]), match[3]
-                out.setdefault((s, t), {})[kind] = self.film.layer_mean(name, self.to_srgb)
+                out.setdefault((s, t), {})[kind] = self.film.layer_mean(name, self.film.to_srgb)
         return dict(sorted(out.items())) or None
 
     def summary(self) -> str:
@@ -93,6 +95,8 @@ class RenderResult:
             text += f"; {s['nonfinite_contributions']} non-finite connections were dropped"
         if s["truncated"]:
             text += f"; {s['truncated']} paths were cut at the safety depth"
+        if s["warnings"]:
+            text += f"; {len(s['warnings'])} warning(s): " + " | ".join(s["warnings"])
         return text
 
 
@@ -103,7 +107,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
            samplers: SamplerSource | None = None, **params: Any) -> RenderResult:
     """Render ``scene`` with an estimator (a name and its ``params``, or an :class:`Estimator`).
 
-    ``spp`` samples (passes) per pixel (default 16), or ``time``: passes are
+    ``spp`` samples (passes) per pixel (default: the scene's ``[render]`` spp, else 16), or ``time``: passes are
     started until that many seconds have passed (at least one runs).
     ``seed`` seeds every random stream: the same seed gives the same image.
     ``threads``: workers (default: every core this process may use).
@@ -121,7 +125,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
         scene = load_scene(scene)
     if spp is not None and time is not None:
         raise ValueError("give either spp or time, not both")
-    spp = 16 if spp is None and time is None else spp
+    spp = (scene.render_spp or DEFAULT_SPP) if spp is None and time is None else spp
     spp = None if spp is None else integer(spp, "spp", low=1)
     time = None if time is None else number(time, "time", low=0.0, low_open=True, what="a number of seconds > 0")
     seed, first_pass = integer(seed, "seed", low=0), integer(first_pass, "first_pass", low=0)
@@ -132,7 +136,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
     estimator.check(scene)
     mode, mode_reason = colour_mode(scene, spectral, wavelength_sampling)
     _tune_allocator()
-    film = Film(scene.camera.width, scene.camera.height, covariance=mode.film_covariance)
+    film = Film(scene.camera.width, scene.camera.height, covariance=mode.film_covariance, to_srgb=mode.film_to_srgb)
     estimator.prepare(scene)  # build the BVHs it needs before the clock starts
     job = RenderJob(scene, mode, samplers or StreamSamplers(seed), film, threads, RenderControl(),
                     progress=_progress_bar(progress, spp, estimator.name))
@@ -144,6 +148,8 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
         if job.progress is not None:
             job.progress.close()
     seconds = job.control.elapsed()
+    warnings = (estimator.warnings(scene) + second_moment_warnings(film)
+                + path_length_warnings(job.counters.longest, job.counters.truncated))
     samples, counters = int(film.count.sum()), job.counters
     stats = {"estimator": estimator.name, "params": estimator.params, "plan": estimator.plan(scene),
              "spp": film.passes, "seed": seed, "first_pass": first_pass, "threads": threads,
@@ -151,10 +157,10 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
              "samples_per_second": samples / seconds, "rays": counters.rays, "rays_per_second": counters.rays / seconds,
              "mode": mode.name, "mode_reason": mode_reason, "nonfinite": film.nonfinite,
              "nonfinite_contributions": counters.nonfinite_contributions, "truncated": counters.truncated,
-             "longest_subpath": counters.longest, "scene": scene.source, **job.stats}
-    matrix = mode.film_to_srgb
-    return RenderResult(image=film.mean(matrix), variance=film.variance(matrix), stats=stats, film=film,
-                        xyz=film.mean() if mode.name == "spectral" else None, to_srgb=matrix)
+             "longest_subpath": counters.longest, "largest_sample_share": second_moment_share(film)[0],
+             "warnings": warnings, "clock": CLOCK, "scene": scene.source, **job.stats}
+    return RenderResult(image=film.image(), variance=film.image_variance(), stats=stats, film=film,
+                        xyz=film.mean() if mode.name == "spectral" else None)
 
 
 def _progress_bar(enabled: bool, total: int | None, estimator: str):

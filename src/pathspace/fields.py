@@ -44,10 +44,12 @@ class Fields:
 
     REQUIRED = _MISSING  # the default that makes a field required
 
-    def __init__(self, table: Any, path: str, source: str, base: str | Path | None = None) -> None:
+    def __init__(self, table: Any, path: str, source: str, base: str | Path | None = None,
+                 files: list[Path] | None = None) -> None:
         self.source = source
         self.path = path
         self.base = Path(base) if base is not None else Path.cwd()  # where relative file names start
+        self.files = files if files is not None else []  # every file read, shared by all readers of a scene
         if not isinstance(table, dict):
             raise self.error(f"expected a table, got {_show(table)}", field=None)
         self.table = table
@@ -84,7 +86,11 @@ class Fields:
         value = self._get(field, default)
         if value is None:
             return None
-        return Fields(value, self.name(field), self.source, self.base)
+        return self.reader(value, self.name(field))
+
+    def reader(self, table: Any, path: str) -> "Fields":
+        """A reader of another table of the same scene (e.g. an item of an array of tables) at ``path``."""
+        return Fields(table, path, self.source, self.base, self.files)
 
     def string(self, field: str, default: Any = _MISSING, choices: Iterable[str] | None = None) -> str:
         """A string, optionally one of ``choices``."""
@@ -165,6 +171,7 @@ class Fields:
         path = Path(name) if Path(name).is_absolute() else self.base / name
         if not path.is_file():
             raise self.error(f"{what} file not found: {path}", field)
+        self.files.append(path)
         return path
 
     def colour(self, field: str, default: Any = _MISSING) -> Colour:

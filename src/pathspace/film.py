@@ -14,9 +14,8 @@ of every pixel.  Estimators hand the film two kinds of contribution:
 
 A pass is complete -- and its samples join the moments -- when every pixel
 has received its ``add_samples``; a pass's splats must therefore be added
-before the last of its samples.  A pass without splats is committed tile by
-tile as its samples arrive.  Samples of passes that never complete (a render
-stopped in the middle of one) are never part of the estimate
+before the last of its samples.  Samples of passes that never complete (a
+render stopped in the middle of one) are never part of the estimate
 (:meth:`discard_incomplete`).  Named *layers* (BDPT's per-strategy images)
 receive splats only; each completed pass adds one sample to every layer, so
 layers have means and variances like the image.
@@ -104,14 +103,20 @@ class _Pass:
 class Film:
     """Accumulators for a width x height image with ``channels`` channels (default 3)."""
 
-    def __init__(self, width: int, height: int, channels: int = 3, covariance: bool = False) -> None:
+    def __init__(self, width: int, height: int, channels: int = 3, covariance: bool = False,
+                 to_srgb: np.ndarray | None = None) -> None:
         self.width, self.height, self.channels = int(width), int(height), int(channels)
         self.covariance = bool(covariance)
+        self.to_srgb = to_srgb  # the matrix from the film's channels to linear sRGB (None: they are sRGB)
         self.moments = Moments(self.channels, self.pixel_count, self.covariance)
         self.count = np.zeros(self.pixel_count, dtype=np.int64)
         self.layers: dict[str, Moments] = {}
         self.passes = 0        # passes completed
         self.nonfinite = 0
+        # Per completed pass: the sum over pixels and channels of its squared samples, and the largest one
+        # (how heavy the tail of the samples is: see pathspace.experiment.diagnostics).
+        self.pass_square_sums: list[float] = []
+        self.pass_square_max: list[float] = []
         self._open: dict[int, _Pass] = {}
 
     @property
@@ -140,7 +145,7 @@ class Film:
                              f"{self.channels} channels and {self.pixel_count} pixels")
         if pass_index not in self._open:
             if count == self.pixel_count:  # a whole pass at once, nothing pending: no assembly needed
-                self._commit_samples(0, values)
+                self._note_pass(self._commit_samples(0, values))
                 self.passes += 1
                 return
             self._open[pass_index] = _Pass(self.channels, self.pixel_count)
@@ -163,8 +168,10 @@ class Film:
             self._splat(int(pass_index), pixels, values, layer)
             return
         pass_index = np.asarray(pass_index, dtype=np.int64)
-        first = int(pass_index.min(initial=0))
-        span = int(pass_index.max(initial=0)) - first + 1
+        if not pass_index.size:
+            return
+        first = int(pass_index.min())
+        span = int(pass_index.max()) - first + 1
         slot = (pass_index - first) * self.pixel_count + pixels
         for c in range(self.channels):
             sums = np.bincount(slot, weights=values[c], minlength=span * self.pixel_count).reshape(span, -1)
@@ -183,7 +190,7 @@ class Film:
 
     def _commit(self, assembly: _Pass) -> None:
         values = assembly.samples if assembly.splats is None else assembly.samples + assembly.splats
-        self._commit_samples(0, values)
+        self._note_pass(self._commit_samples(0, values))
         for name, values in assembly.layers.items():
             if name not in self.layers:
                 self.layers[name] = Moments(self.channels, self.pixel_count, self.covariance)
@@ -194,13 +201,20 @@ class Film:
             self.layers[name].add(0, values)
         self.passes += 1
 
-    def _commit_samples(self, start: int, values: np.ndarray) -> None:
+    def _commit_samples(self, start: int, values: np.ndarray) -> np.ndarray:
+        """Add finite samples to the moments (non-finite ones counted and left out); returns what was added."""
         finite = np.isfinite(values).all(axis=0)
         if not finite.all():
             self.nonfinite += int((~finite).sum())
             values = np.where(finite, values, 0.0)
         self.count[start:start + values.shape[1]] += finite
         self.moments.add(start, values)
+        return values
+
+    def _note_pass(self, values: np.ndarray) -> None:
+        squares = values * values
+        self.pass_square_sums.append(float(squares.sum()))
+        self.pass_square_max.append(float(squares.max(initial=0.0)))
 
     def add_tile(self, start: int, values: np.ndarray) -> None:
         """Add one complete sample to each of the pixels start .. start + N - 1 (``values`` (C, N)),
@@ -219,7 +233,8 @@ class Film:
     def merge(self, other: "Film") -> None:
         """Add the completed passes of another film of the same size."""
         if (other.width, other.height, other.channels, other.covariance) != (
-                self.width, self.height, self.channels, self.covariance):
+                self.width, self.height, self.channels, self.covariance) or (
+                (self.to_srgb is None) != (other.to_srgb is None)):
             raise ValueError("films must have the same size, channels and moments to merge")
         for name in set(self.layers) | set(other.layers):
             if name not in self.layers:
@@ -230,6 +245,8 @@ class Film:
         self.count += other.count
         self.passes += other.passes
         self.nonfinite += other.nonfinite
+        self.pass_square_sums += other.pass_square_sums
+        self.pass_square_max += other.pass_square_max
 
     # -- developing ---------------------------------------------------------------------------------
 
@@ -244,6 +261,14 @@ class Film:
     def variance(self, matrix: np.ndarray | None = None) -> np.ndarray:
         """Estimated variance of the per-pixel mean (of ``matrix`` times it); inf below 2 samples."""
         return self._image(self.moments.variance(self.count, matrix))
+
+    def image(self) -> np.ndarray:
+        """The per-pixel mean in linear sRGB (height, width, 3), for RGB and spectral (XYZ) films alike."""
+        return self.mean(self.to_srgb)
+
+    def image_variance(self) -> np.ndarray:
+        """The estimated variance of :meth:`image`."""
+        return self.variance(self.to_srgb)
 
     def layer_mean(self, name: str, matrix: np.ndarray | None = None) -> np.ndarray:
         """Mean of layer ``name`` per pixel over the completed passes (height, width, channels)."""

@@ -12,14 +12,30 @@ from __future__ import annotations
 
 import json
 import os
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-__all__ = ["write_exr", "read_exr", "write_png", "to_srgb8"]
+__all__ = ["write_exr", "read_exr", "write_png", "to_srgb8", "display"]
 
 METADATA_PREFIX = "pathspace."
+
+
+@contextmanager
+def _atomic(path: str | os.PathLike):
+    """A temporary file beside ``path`` that replaces it only once written completely (no partial file
+    ever replaces a good one)."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        yield temporary
+        os.replace(temporary, path)
+    finally:
+        if temporary.exists():
+            temporary.unlink()
 
 
 def _check_image(image: np.ndarray, name: str) -> np.ndarray:
@@ -58,9 +74,9 @@ def write_exr(path: str | os.PathLike, image: np.ndarray, variance: np.ndarray |
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for key, value in (metadata or {}).items():
         header[METADATA_PREFIX + key] = value if isinstance(value, str) else json.dumps(value, default=str)
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    with OpenEXR.File(header, channels) as exr:
-        exr.write(str(path))
+    with _atomic(path) as temporary:
+        with OpenEXR.File(header, channels) as exr:
+            exr.write(str(temporary))
 
 
 def read_exr(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray | None, dict[str, Any]]:
@@ -97,13 +113,18 @@ def read_exr(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray | None, di
     return image.astype(np.float32), (variance.astype(np.float32) if variance is not None else None), metadata
 
 
-def to_srgb8(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
-    """Linear RGB (H, W, 3) -> 8-bit sRGB: scale by 2**exposure, clip to [0, 1], sRGB OETF (IEC 61966-2-1)."""
+def display(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
+    """The display image of linear RGB (H, W, 3): scaled by 2**exposure, clipped to [0, 1] (NaN as 0) and
+    encoded with the sRGB transfer function (IEC 61966-2-1), float64 in [0, 1]."""
     from ._colour import colour
 
     scaled = np.clip(np.nan_to_num(np.asarray(image, dtype=np.float64) * 2.0 ** exposure, nan=0.0), 0.0, 1.0)
-    encoded = colour.cctf_encoding(scaled, function="sRGB")
-    return np.round(encoded * 255.0).astype(np.uint8)
+    return np.asarray(colour.cctf_encoding(scaled, function="sRGB"), dtype=np.float64)
+
+
+def to_srgb8(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
+    """Linear RGB (H, W, 3) -> 8-bit sRGB: the :func:`display` image rounded to 8 bits."""
+    return np.round(display(image, exposure) * 255.0).astype(np.uint8)
 
 
 def write_png(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.0) -> None:
@@ -111,5 +132,5 @@ def write_png(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.0)
     from PIL import Image
 
     image = _check_image(image, "image")
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(to_srgb8(image, exposure), mode="RGB").save(str(path))
+    with _atomic(path) as temporary:
+        Image.fromarray(to_srgb8(image, exposure), mode="RGB").save(str(temporary), format="PNG")

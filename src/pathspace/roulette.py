@@ -17,21 +17,32 @@ the estimate stays unbiased for any q in (0, 1].  Policies (``rr``):
 ``"throughput"``  q = min(largest channel of the walk's throughput after this
                   vertex, ``rr_cap``): walks carrying little energy end early
                   and a survivor's throughput is lifted back toward 1 (pbrt-v4's
-                  rule, cap 1).  A light subpath's throughput is measured
-                  relative to the ray leaving the light, so that the choice does
-                  not depend on the light's units.  Mitsuba 3 caps at 0.95,
-                  which gives infinite variance wherever the albedo exceeds the
-                  cap (throughput then grows by albedo / cap per bounce): in an
+                  rule, cap 1).  The throughput read is free of the 1 / eta^2
+                  scaling of radiance by refraction (as Mitsuba 3 does): light
+                  inside glass is not less important for being inside.  At
+                  specular vertices q is capped at 0.9 as under "albedo": a
+                  walk trapped in glass by total internal reflection keeps a
+                  throughput of 1 and would otherwise never end.  A light
+                  subpath's throughput is measured relative to the ray leaving
+                  the light, so that the choice does not depend on the light's
+                  units.  Mitsuba 3 caps every vertex at 0.95, which gives
+                  infinite variance wherever the albedo exceeds the cap
+                  (throughput then grows by albedo / cap per bounce): in an
                   albedo-0.99 furnace its finite-sample means fall ~10% short.
 
-"off", "fixed" and "albedo" are *local*: q depends only on the vertex's
-material and depth, the same whichever direction a walk passes the vertex,
-so bidirectional estimators include q in the vertex densities that their
-MIS weights compare (as SmallVCM does).  "throughput" depends on the walk
-that reached the vertex, which the opposite walk cannot know; bidirectional
-estimators then leave q out of the MIS densities (the weights stay a
-partition of unity over the strategies, so the estimate stays unbiased; they
-are no longer exactly the heuristic of the true densities).
+"off", "fixed" and "albedo" are *local*: past ``rr_depth``, q depends only on
+the vertex's material, the same whichever direction a walk passes the
+vertex, so bidirectional estimators include it in the vertex densities that
+their MIS weights compare (as SmallVCM does; :meth:`RussianRoulette.local_survival`).
+Those densities must be one function of the path for every strategy -- or
+the weights of a path no longer sum to one and the image is biased -- so
+they take q at every vertex, also where a walk had not yet reached
+``rr_depth`` (the depth of a vertex differs as seen from the camera and from
+the light).  "throughput" depends on the walk that reached the vertex, which
+the opposite walk cannot know; bidirectional estimators then leave q out of
+the MIS densities.  In both cases the weights stay a partition of unity over
+the strategies, so the estimate is unbiased; they are the exact heuristic of
+the true densities when ``rr_depth`` is 1 and the policy is local.
 """
 from __future__ import annotations
 
@@ -41,7 +52,7 @@ import numpy as np
 
 from .checks import choice, integer, number
 
-__all__ = ["RussianRoulette", "POLICIES", "SPECULAR_CONTINUATION"]
+__all__ = ["RussianRoulette", "POLICIES", "SPECULAR_CONTINUATION", "roulette_warnings"]
 
 POLICIES = ("off", "fixed", "albedo", "throughput")
 # The largest survival probability "albedo" gives lossless specular (delta) materials.
@@ -78,13 +89,25 @@ class RussianRoulette:
                 "throughput": f"survival probability = max throughput, capped at {self.cap:g}"}[self.policy]
         return f"Russian roulette from depth {self.start_depth}: {rule}"
 
-    def survival(self, depth: np.ndarray, throughput: np.ndarray | None, albedo: np.ndarray) -> np.ndarray | None:
+    def local_survival(self, albedo: np.ndarray) -> np.ndarray | None:
+        """q of a local policy at vertices of materials with ``albedo`` (N,), past ``rr_depth``: what
+        multiple importance sampling puts in the vertex densities; None for "throughput" and "off" (1)."""
+        if self.policy == "fixed":
+            return np.full(albedo.shape, 1.0 - self.probability)
+        if self.policy == "albedo":
+            return np.clip(albedo, 0.0, 1.0)
+        return None
+
+    def survival(self, depth: np.ndarray, throughput: np.ndarray | None, albedo: np.ndarray,
+                 specular: np.ndarray | None = None) -> np.ndarray | None:
         """Survival probabilities (N,) at vertices reached after ``depth`` (N,) segments, or None (all survive).
 
         ``throughput`` (C, N) is the walk's throughput including this
         vertex's sample weight (read by "throughput" only; None otherwise
         allowed); ``albedo`` (N,) the albedo of each vertex's material
-        (see :attr:`pathspace.bsdfs.MaterialTable.albedo`).
+        (see :attr:`pathspace.bsdfs.MaterialTable.albedo`); ``specular`` (N,)
+        whether the vertex sampled a delta lobe ("throughput" caps those at
+        ``SPECULAR_CONTINUATION``).
         """
         if self.policy == "off" or depth.max(initial=0) < self.start_depth:
             return None
@@ -94,4 +117,35 @@ class RussianRoulette:
             q = np.clip(albedo, 0.0, 1.0)
         else:
             q = np.clip(throughput.max(axis=0), 0.0, self.cap)
+            if specular is not None and self.cap > SPECULAR_CONTINUATION:
+                q = np.where(specular, np.minimum(q, SPECULAR_CONTINUATION), q)
         return np.where(depth >= self.start_depth, q, 1.0)
+
+
+def roulette_warnings(roulette: RussianRoulette, materials, max_depth: int = -1) -> list[str]:
+    """Settings with infinite variance, from the policy and the albedos of a MaterialTable alone.
+
+    A walk that survives a vertex of albedo rho with probability q carries
+    the weight rho / q on, and the second moment of its contribution grows by
+    rho^2 / q per such bounce (Veach 1997, sec. 2.4): where rho^2 >= q --
+    a fixed termination probability 1 - q >= 1 - rho^2, or a throughput cap
+    below the albedo -- paths that keep bouncing among such surfaces make the
+    variance infinite.  (In the closed Cornell boxes, whose white walls
+    reflect 0.886, a fixed termination probability of 0.22 or more does.)
+    """
+    if roulette.policy == "fixed":
+        q = 1.0 - roulette.probability
+        bad = [(name, a) for name, a in zip(materials.names, materials.albedo) if a * a >= q]
+        rule = f"fixed termination probability {roulette.probability:g} (survival {q:g})"
+    elif roulette.policy == "throughput" and roulette.cap < 1.0:
+        q = roulette.cap
+        bad = [(name, a) for name, a in zip(materials.names, materials.albedo) if a > q]
+        rule = f"throughput roulette capped at survival {q:g}"
+    else:
+        return []
+    if not bad or 0 < max_depth <= roulette.start_depth:
+        return []
+    named = ", ".join(f"{name!r} (albedo {a:.3g})" for name, a in bad)
+    return [f"{rule}: paths that keep bouncing among {named} gain weight at every bounce and have infinite "
+            f"variance (survival must exceed albedo^2 for fixed roulette, the albedo for a capped throughput); "
+            "use rr='albedo' or 'throughput', or a termination probability below 1 - albedo^2"]

@@ -134,4 +134,8 @@ class MaterialLanes:
             out.wi[:, idx], out.weight[:, idx], out.pdf[idx], out.delta[idx] = s.wi, s.weight, s.pdf, s.delta
             if s.terminated is not None:
                 out.terminated[idx] = s.terminated
+            if s.eta is not None:
+                if out.eta is None:
+                    out.eta = np.ones(self.count)
+                out.eta[idx] = s.eta
         return out

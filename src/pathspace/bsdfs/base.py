@@ -44,7 +44,11 @@ class BSDFSample:
     solid-angle density (for delta lobes: the discrete probability of the
     chosen lobe); ``delta`` (N,) bool, whether the sampled lobe is a delta
     (its pdf is not a density and it cannot be reached by other strategies);
-    ``terminated`` (N,) bool or None: the sample kept only the hero wavelength.
+    ``terminated`` (N,) bool or None: the sample kept only the hero wavelength;
+    ``eta`` (N,) or None: the relative index of refraction eta_t / eta_i the
+    sample crossed (1 where it reflected; None for models that never refract)
+    -- radiance crossing it is scaled by 1 / eta^2, which Russian roulette
+    undoes before it reads the throughput.
     """
 
     wi: np.ndarray
@@ -52,6 +56,7 @@ class BSDFSample:
     pdf: np.ndarray
     delta: np.ndarray
     terminated: np.ndarray | None = None  # (N,) bool: a dispersive interface terminated secondary wavelengths
+    eta: np.ndarray | None = None
 
 
 class Surface:

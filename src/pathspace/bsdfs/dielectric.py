@@ -118,7 +118,8 @@ class Dielectric:
         if params.dispersive.any() and params.channels == WAVELENGTHS_PER_PATH:
             weight[1:] *= ~params.dispersive
             terminated = params.dispersive
-        return BSDFSample(wi.astype(np.float32), weight, pdf, np.ones(count, dtype=bool), terminated)
+        return BSDFSample(wi.astype(np.float32), weight, pdf, np.ones(count, dtype=bool), terminated,
+                          np.where(reflects, 1.0, eta))
 
 
 def _ior(fields) -> Index:

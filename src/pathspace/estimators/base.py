@@ -211,6 +211,10 @@ class Estimator(ABC):
     def check(self, scene) -> None:
         """Raise ValueError if this estimator cannot render ``scene`` correctly."""
 
+    def warnings(self, scene) -> list[str]:
+        """What is wrong with these parameters on ``scene`` although it renders (e.g. infinite variance)."""
+        return []
+
     def prepare(self, scene) -> None:
         """Build what the render needs before its clock starts (acceleration structures)."""
         scene.accel

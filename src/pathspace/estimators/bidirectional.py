@@ -23,7 +23,7 @@ from typing import Callable, Iterator, Mapping
 
 import numpy as np
 
-from ..roulette import RussianRoulette
+from ..roulette import RussianRoulette, roulette_warnings
 from ..sampler import Sampler
 from ..spectra import RGBMode
 from . import parameters as p
@@ -86,6 +86,10 @@ class Bidirectional(Estimator):
     def __post_init__(self) -> None:
         super().__post_init__()
         self.roulette = RussianRoulette(self.rr, self.rr_depth, self.rr_probability, self.rr_cap)
+
+    def warnings(self, scene) -> list[str]:
+        """Roulette settings with infinite variance on ``scene``."""
+        return roulette_warnings(self.roulette, scene.materials, self.max_depth)
 
     @property
     def depth_limit(self) -> int:

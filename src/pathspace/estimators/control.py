@@ -1,4 +1,4 @@
-"""The clock and the brakes of a render: elapsed time without pauses, pausing, and cancelling.
+"""The clock and the brakes of a render: elapsed time without pauses, pausing, a deadline, cancelling.
 
 Estimators call :meth:`RenderControl.check` between wavefront steps (a
 bounce, a subpath vertex, a batch of connections).  It returns at once while
@@ -6,7 +6,10 @@ the render runs, waits while it is paused (the render loop pauses it while
 ``on_checkpoint`` looks at the film, so that the time spent developing
 snapshots is not render time, and the work done meanwhile is small), and
 raises :class:`Interrupted` once the render has been cancelled (another
-worker failed, or the user stopped it).
+worker failed, or the user stopped it) or -- with a time budget, once a
+first pass is complete -- its deadline has passed: a running item checks the
+clock, so a budget is met however long the paths are (the unfinished work
+is dropped; the film holds whole passes only).
 """
 from __future__ import annotations
 
@@ -29,8 +32,9 @@ class RenderControl:
         self._paused_total = 0.0
         self._running = threading.Event()
         self._running.set()
-        self._cancelled = threading.Event()
-        self.reason = ""
+        self.reason = ""  # why the render was cancelled; empty while it runs
+        self.deadline: float | None = None  # render seconds after which check() stops the workers ...
+        self.may_stop = False               # ... once the render may stop (a first pass is complete)
 
     def start(self) -> None:
         """Start the clock."""
@@ -58,18 +62,19 @@ class RenderControl:
 
     def cancel(self, reason: str = "cancelled") -> None:
         """Stop the render: workers raise :class:`Interrupted` at their next :meth:`check`."""
-        self.reason = reason
-        self._cancelled.set()
+        self.reason = reason or "cancelled"
         self._running.set()
 
     @property
     def cancelled(self) -> bool:
         """Whether :meth:`cancel` was called."""
-        return self._cancelled.is_set()
+        return bool(self.reason)
 
     def check(self) -> None:
         """Called by workers between steps: wait while paused, raise :class:`Interrupted` if cancelled."""
-        if not self._running.is_set():
+        if self._paused_since is not None:
             self._running.wait()
-        if self._cancelled.is_set():
+        if self.reason:
             raise Interrupted(self.reason)
+        if self.may_stop and self.deadline is not None and self.elapsed() >= self.deadline:
+            raise Interrupted("the time budget is spent")

@@ -21,24 +21,27 @@ from .control import Interrupted
 
 __all__ = ["render_passes", "work_layout"]
 
+# With a time budget, items hold 1 / TIMED_ITEM_SHARE of the lanes they would otherwise.
+TIMED_ITEM_SHARE = 4
+
 
 def work_layout(pixel_count: int, passes: int | None, workers: int, tile_pixels: int) -> tuple[int, int]:
     """(tile size in pixels, passes per work item) for an image of ``pixel_count`` pixels, in items of
     about ``tile_pixels`` lanes.
 
     Small images pack several passes into an item, but no more than keeps
-    every worker busy when the number of ``passes`` is known.  The grouping
-    changes neither the random streams nor the order in which samples reach
-    the film.
+    every worker busy when the number of ``passes`` is known, and with a time
+    budget (``passes`` None) a quarter as many -- work in flight at the
+    deadline is dropped, so it is cut finer.  The grouping changes neither
+    the random streams nor the order in which samples reach the film.
     """
     tiles = -(-pixel_count // tile_pixels)
     tile = -(-pixel_count // tiles)
     if tiles > 1:
         return tile, 1
-    per_item = max(1, tile_pixels // pixel_count)
-    if passes is not None:
-        per_item = min(per_item, max(1, -(-passes // (2 * workers))))
-    return tile, per_item
+    if passes is None:
+        return tile, max(1, tile_pixels // (TIMED_ITEM_SHARE * pixel_count))
+    return tile, min(max(1, tile_pixels // pixel_count), max(1, -(-passes // (2 * workers))))
 
 
 def _pass_groups(passes: Iterator[int], size: int, first: int, breaks: set[int]) -> Iterator[range]:
@@ -127,6 +130,7 @@ def render_passes(estimator, job: RenderJob, budget: Budget,
                 running[0] -= 1
                 done.notify()
 
+    control.deadline = budget.seconds
     workers = [threading.Thread(target=work, args=(k,), daemon=True) for k in range(job.threads)]
     for w in workers:
         w.start()
@@ -143,6 +147,7 @@ def render_passes(estimator, job: RenderJob, budget: Budget,
             expected += 1
             before = film.passes
             result.deliver(film)
+            control.may_stop = film.passes > 0
             if job.progress is not None and film.passes > before:
                 job.progress.update(film.passes - before)
             checkpoints.update()

@@ -57,7 +57,7 @@ import numpy as np
 from ..bsdfs import MaterialLanes
 from ..checks import choice, number
 from ..mis import TWO_STRATEGY, mis_weight
-from ..roulette import RussianRoulette
+from ..roulette import RussianRoulette, roulette_warnings
 from ..sampler import Sampler
 from ..spectra import RGBMode
 from ..vecmath import dot, leave_distance
@@ -144,6 +144,10 @@ class PathTracer(Estimator):
         lines.append(f"specular (delta) materials: {', '.join(delta)}: no light sampling at their vertices"
                      if delta else "no specular (delta) materials: no specular code runs")
         return lines
+
+    def warnings(self, scene) -> list[str]:
+        """Roulette settings with infinite variance on ``scene``."""
+        return roulette_warnings(self.roulette, scene.materials, self.max_depth)
 
     def check(self, scene) -> None:
         """Raise ValueError if this estimator cannot render ``scene`` correctly."""
@@ -269,7 +273,7 @@ class PathTracer(Estimator):
         sample = materials.sample(arrival.surface, u.bsdf)
         # Roulette reads the BSDF sample's weight (an albedo estimate): a mixture weight f / p_mix is
         # tiny exactly where a bright light about to be hit makes up for it, and would end such paths.
-        survival = walk.survival(arrival, sample.weight)
+        survival = walk.survival(arrival, sample)
         if bounce.strategy == "mixture":
             self._mixture(scene, materials, arrival, sample, u, colours)
         if sample.terminated is not None:

@@ -214,13 +214,17 @@ class _Recorder:
     def __init__(self) -> None:
         self.records: list[dict[str, np.ndarray]] = []
 
-    def add(self, lanes, index, p, n, eps, wo, beta, fwd, g_prev, kind, material, entity, q, infinite, u,
-            delta) -> dict:
+    def add(self, lanes: np.ndarray, index: int, kind: int, **fields: np.ndarray) -> dict:
+        """Record vertex ``index`` of ``kind`` for ``lanes``: the given :data:`FIELDS` (``p``, ``n``, ``beta``,
+        ``fwd``, ``u`` at least); the others default to an off-surface vertex (no offset, no material, no
+        light, q = 1) with nothing before it (``wo``, ``g_prev`` zero)."""
         count = lanes.size
-        record = dict(lane=lanes, index=np.full(count, index, dtype=np.int64), p=p, n=n, eps=eps, wo=wo, beta=beta,
-                      fwd=fwd, rev=np.zeros(count), g_prev=g_prev, delta=delta,
-                      kind=np.full(count, kind, dtype=np.int8), material=material, entity=entity, q=q,
-                      infinite=infinite, u=u)
+        record = dict(lane=lanes, index=np.full(count, index, dtype=np.int64), kind=np.full(count, kind, dtype=np.int8),
+                      rev=np.zeros(count), eps=np.zeros(count, np.float32), wo=np.zeros((3, count), np.float32),
+                      g_prev=np.zeros(count), material=np.full(count, -1, np.int64),
+                      entity=np.full(count, -1, np.int64), q=np.ones(count), infinite=np.zeros(count, bool),
+                      delta=np.zeros(count, bool))
+        record.update(fields)
         self.records.append(record)
         return record
 
@@ -279,10 +283,10 @@ class _Growth:
         u = walk.draw()
         q = walk.mis_survival(arrival)
         emitter = settings.scene.lights.area.emitter_of_triangle
-        record = self.recorder.add(lanes.lane, index, arrival.p, arrival.normal, arrival.eps, -lanes.direction,
-                                   lanes.beta, fwd, g_prev, SURFACE, arrival.material.astype(np.int64),
-                                   emitter.take(arrival.prim), q, np.zeros(walk.size, bool), u.connect,
-                                   table.delta.take(arrival.material))
+        record = self.recorder.add(lanes.lane, index, SURFACE, p=arrival.p, n=arrival.normal, eps=arrival.eps,
+                                   wo=-lanes.direction, beta=lanes.beta, fwd=fwd, g_prev=g_prev,
+                                   material=arrival.material.astype(np.int64), entity=emitter.take(arrival.prim), q=q,
+                                   u=u.connect, delta=table.delta.take(arrival.material))
         if index + 1 >= settings.max_vertices:
             if settings.max_vertices >= SAFETY_VERTICES:
                 settings.counters.truncated += walk.size
@@ -294,8 +298,7 @@ class _Growth:
         self.previous["rev"][np.searchsorted(self.previous["lane"], lanes.lane)] = pdf_back * g_prev
         if sample.terminated is not None:
             self.terminated[lanes.lane[sample.terminated]] = True
-        survival = walk.survival(arrival, sample.weight)
-        alive = walk.scatter(arrival, sample, u.roulette, survival)
+        alive = walk.scatter(arrival, sample, u.roulette, walk.survival(arrival, sample), q)
         lanes.prev_n, lanes.prev_infinite = arrival.normal, np.zeros(walk.size, bool)
         self.previous = record
         if not alive.all():
@@ -320,19 +323,18 @@ class _Growth:
         lanes = self.walk.lanes
         count = k.size
         d = np.take(lanes.direction, k, axis=1)
-        self.recorder.add(lanes.lane.take(k), int(lanes.depth[0]), np.take(lanes.origin, k, axis=1), d,
-                          np.zeros(count, np.float32), -d, np.take(lanes.beta, k, axis=1), self._mis_pdf().take(k),
-                          cos_at(np.take(lanes.prev_n, k, axis=1), d), LIGHT, np.full(count, -1, np.int64),
-                          np.full(count, self.settings.scene.lights.environment_entity, np.int64), np.ones(count),
-                          np.ones(count, bool), np.zeros((CAMERA_VERTEX.sizes["connect"], count)),
-                          np.zeros(count, bool))
+        self.recorder.add(lanes.lane.take(k), int(lanes.depth[0]), LIGHT, p=np.take(lanes.origin, k, axis=1), n=d,
+                          wo=-d, beta=np.take(lanes.beta, k, axis=1), fwd=self._mis_pdf().take(k),
+                          g_prev=cos_at(np.take(lanes.prev_n, k, axis=1), d),
+                          entity=np.full(count, self.settings.scene.lights.environment_entity, np.int64),
+                          infinite=np.ones(count, bool), u=np.zeros((CAMERA_VERTEX.sizes["connect"], count)))
 
 
-def _walk_lanes(count: int, origin, direction, beta, pdf, normal, infinite, tmin, **extra) -> Lanes:
-    """Walk state leaving vertex 0 (``normal``, ``infinite``) along ``direction`` with density ``pdf``."""
-    return Lanes(_WALK_FIELDS + tuple(extra), depth=np.zeros(count, np.int32), origin=origin, direction=direction,
-                 tmin=tmin, beta=beta, pdf=pdf, delta=np.zeros(count, bool), lane=np.arange(count), q=np.ones(count),
-                 prev_n=normal, prev_infinite=infinite, **extra)
+def _walk_lanes(count: int, **state: np.ndarray) -> Lanes:
+    """Walk state of ``count`` lanes leaving vertex 0: ``origin``, ``direction``, ``tmin``, ``beta``, ``pdf``,
+    ``prev_n`` and ``prev_infinite`` (vertex 0's normal and whether it is at infinity), and any extra fields."""
+    return Lanes(_WALK_FIELDS + tuple(f for f in state if f not in _WALK_FIELDS), depth=np.zeros(count, np.int32),
+                 delta=np.zeros(count, bool), lane=np.arange(count), q=np.ones(count), **state)
 
 
 def camera_subpaths(settings: SubpathSettings, pixels: np.ndarray, sampler) -> Subpaths:
@@ -350,13 +352,11 @@ def camera_subpaths(settings: SubpathSettings, pixels: np.ndarray, sampler) -> S
     origin = np.ascontiguousarray(origin, dtype=np.float32)
     axis = np.repeat(camera.forward.astype(np.float32)[:, None], count, axis=1)
     recorder = _Recorder()
-    record = recorder.add(np.arange(count), 0, origin, axis, np.zeros(count, np.float32),
-                          np.zeros((3, count), np.float32), np.ones((channels, count)),
-                          np.full(count, 1.0 / camera.lens_area), np.zeros(count), CAMERA, np.full(count, -1, np.int64),
-                          np.full(count, -1, np.int64), np.ones(count), np.zeros(count, bool),
-                          np.zeros((CAMERA_VERTEX.sizes["connect"], count)), np.zeros(count, bool))
-    lanes = _walk_lanes(count, origin, direction, np.ones((channels, count)), camera.pdf_direction(direction, origin),
-                        axis, np.zeros(count, bool), np.zeros(count, np.float32))
+    record = recorder.add(np.arange(count), 0, CAMERA, p=origin, n=axis, beta=np.ones((channels, count)),
+                          fwd=np.full(count, 1.0 / camera.lens_area), u=np.zeros((CAMERA_VERTEX.sizes["connect"], count)))
+    lanes = _walk_lanes(count, origin=origin, direction=direction, tmin=np.zeros(count, np.float32),
+                        beta=np.ones((channels, count)), pdf=camera.pdf_direction(direction, origin), prev_n=axis,
+                        prev_infinite=np.zeros(count, bool))
     growth = _Growth(settings, Walk(scene, lanes, sampler, settings.roulette, CAMERA_VERTEX), recorder, record, count)
     growth.escapes = scene.lights.environment is not None
     growth.run()
@@ -381,11 +381,10 @@ def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool) -
         beta0 = np.where(e.pdf_pos > 0, 1.0 / e.pdf_pos, 0.0)
         beta = e.value * np.where(e.pdf_dir > 0, beta0 * e.cos_light / e.pdf_dir, 0.0)
     recorder = _Recorder()
-    record = recorder.add(np.arange(count), 0, e.point.astype(np.float32), e.normal, e.epsilon,
-                          np.zeros((3, count), np.float32), np.repeat(beta0[None, :], colours.channels, axis=0),
-                          lights.pdf_le(e.entity, e.normal, e.direction)[0], np.zeros(count), LIGHT,
-                          np.full(count, -1, np.int64), e.entity.astype(np.int64), np.ones(count), e.infinite,
-                          u.connect, np.zeros(count, bool))
+    record = recorder.add(np.arange(count), 0, LIGHT, p=e.point.astype(np.float32), n=e.normal, eps=e.epsilon,
+                          beta=np.repeat(beta0[None, :], colours.channels, axis=0),
+                          fwd=lights.pdf_le(e.entity, e.normal, e.direction)[0], entity=e.entity.astype(np.int64),
+                          infinite=e.infinite, u=u.connect)
     # From a light at infinity the next vertex's density is the disk density, projected at the hit.
     pmf = lights.pmf("power").take(e.entity)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -394,8 +393,8 @@ def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool) -
     if settings.roulette.policy == "throughput":  # the throughput is measured relative to the ray leaving the light
         start = beta.max(axis=0)
         extra["rr_scale"] = np.divide(1.0, start, out=np.zeros_like(start), where=start > 0)
-    lanes = _walk_lanes(count, e.point.astype(np.float32), e.direction, beta, pdf, e.normal, e.infinite, e.tmin,
-                        **extra)
+    lanes = _walk_lanes(count, origin=e.point.astype(np.float32), direction=e.direction, tmin=e.tmin, beta=beta,
+                        pdf=pdf, prev_n=e.normal, prev_infinite=e.infinite, **extra)
     growth = _Growth(settings, Walk(scene, lanes, sampler, settings.roulette, LIGHT_VERTEX, "importance"), recorder,
                      record, count)
     growth.lens_hits = [] if lens else None

@@ -25,7 +25,9 @@ the current direction (of a delta lobe: its discrete probability); ``delta``
 whether it was a delta lobe; and, for walks whose vertex densities matter
 (subpaths), ``q``: the survival probability the roulette gave at the vertex
 the ray left, as multiple importance sampling sees it (1 for policies that
-are not local, see :mod:`pathspace.roulette`).
+are not local, see :mod:`pathspace.roulette`).  Walks from the camera under
+"throughput" roulette also carry ``eta_scale``, the product of eta^2 over the
+refractions so far, which the roulette multiplies into the throughput.
 """
 from __future__ import annotations
 
@@ -55,14 +57,12 @@ class Dimensions:
     def __init__(self, **sizes: int) -> None:
         self.sizes = dict(sizes)
         self.size = sum(self.sizes.values())
+        ends = np.cumsum([0] + list(self.sizes.values()))
+        self._slices = [(name, slice(int(a), int(b))) for name, a, b in zip(self.sizes, ends[:-1], ends[1:])]
 
     def split(self, u: np.ndarray) -> SimpleNamespace:
         """The rows of ``u`` (size, N) by name."""
-        parts, start = {}, 0
-        for name, size in self.sizes.items():
-            parts[name] = u[start:start + size]
-            start += size
-        return SimpleNamespace(**parts)
+        return SimpleNamespace(**{name: u[rows] for name, rows in self._slices})
 
     def __add__(self, other: "Dimensions") -> "Dimensions":
         return Dimensions(**self.sizes, **other.sizes)
@@ -109,6 +109,8 @@ class Walk:
         self.scene, self.lanes, self.sampler = scene, lanes, sampler
         self.roulette, self.dims, self.transport = roulette, dims, transport
         self.rays = 0
+        if roulette.policy == "throughput" and transport == "radiance" and "eta_scale" not in lanes.fields:
+            lanes.add("eta_scale", np.ones(lanes.size))  # the product of eta^2 over the refractions so far
 
     @property
     def size(self) -> int:
@@ -140,27 +142,32 @@ class Walk:
         direction = self.lanes.direction
         return Arrival(prim, t, p, normal, eps, -dot(normal, direction), direction, self.scene.mesh.material.take(prim))
 
-    def survival(self, hit: Arrival, weight: np.ndarray) -> np.ndarray | None:
-        """Roulette's survival probabilities at ``hit`` for sample weights ``weight`` (C, N), or None."""
-        roulette = self.roulette
+    def survival(self, hit: Arrival, sample: BSDFSample, weight: np.ndarray | None = None) -> np.ndarray | None:
+        """Roulette's survival probabilities at ``hit`` for the BSDF ``sample`` there (whose ``weight`` the
+        throughput takes, unless another is given), or None (all survive)."""
+        roulette, lanes = self.roulette, self.lanes
         throughput = None
         if roulette.policy == "throughput":
-            throughput = self.lanes.beta * weight
-            if "rr_scale" in self.lanes.fields:
-                throughput = throughput * self.lanes.rr_scale
-        return roulette.survival(self.lanes.depth, throughput, self.scene.materials.albedo.take(hit.material))
+            throughput = lanes.beta * (sample.weight if weight is None else weight)
+            if "rr_scale" in lanes.fields:     # light subpaths: relative to the ray leaving the light
+                throughput = throughput * lanes.rr_scale
+            if self.transport == "radiance":   # undo the 1 / eta^2 of refractions (see pathspace.roulette)
+                scale = lanes.eta_scale if sample.eta is None else lanes.eta_scale * sample.eta * sample.eta
+                throughput = throughput * scale
+        return roulette.survival(lanes.depth, throughput, self.scene.materials.albedo.take(hit.material),
+                                 sample.delta)
 
     def mis_survival(self, hit: Arrival) -> np.ndarray:
         """q at ``hit`` as multiple importance sampling sees it (N,): the survival probability of a local
-        roulette policy, 1 for others (see :mod:`pathspace.roulette`)."""
-        q = self.survival(hit, None) if self.roulette.local else None
+        roulette policy past ``rr_depth``, whatever the depth; 1 for others (see :mod:`pathspace.roulette`)."""
+        q = self.roulette.local_survival(self.scene.materials.albedo.take(hit.material))
         return np.ones(self.size) if q is None else q
 
-    def scatter(self, hit: Arrival, sample: BSDFSample, u_roulette: np.ndarray,
-                survival: np.ndarray | None) -> np.ndarray:
+    def scatter(self, hit: Arrival, sample: BSDFSample, u_roulette: np.ndarray, survival: np.ndarray | None,
+                q_mis: np.ndarray | None = None) -> np.ndarray:
         """Leave ``hit`` along ``sample``: throughput times its weight over the ``survival`` probability
-        (None: 1; decided by ``u_roulette`` (1, N)), the sample's direction and density, q for MIS (if
-        the lanes keep a ``q``).  Returns a mask of the lanes that go on
+        (None: 1; decided by ``u_roulette`` (1, N)), the sample's direction and density, and q for MIS
+        (``q_mis``, or :meth:`mis_survival`) if the lanes keep a ``q``.  Returns a mask of the lanes that go on
         (not absorbed, not terminated by roulette); the caller keeps them."""
         lanes = self.lanes
         alive = sample.weight.max(axis=0) > 0
@@ -169,8 +176,10 @@ class Walk:
             alive &= u_roulette[0] < survival
             np.divide(lanes.beta, survival, out=lanes.beta, where=survival > 0)
         if "q" in lanes.fields:
-            lanes.q = survival if survival is not None and self.roulette.local else np.ones(lanes.size)
+            lanes.q = self.mis_survival(hit) if q_mis is None else q_mis
         lanes.pdf, lanes.delta, lanes.direction = sample.pdf, sample.delta, sample.wi
+        if sample.eta is not None and "eta_scale" in lanes.fields:
+            lanes.eta_scale = lanes.eta_scale * sample.eta * sample.eta
         lanes.origin = hit.p
         lanes.tmin = leave_distance(hit.eps, dot(hit.normal, sample.wi))
         return alive

@@ -77,6 +77,11 @@ class Lanes:
         for name in self.fields:
             setattr(self, name, None if name in stale else np.take(getattr(self, name), indices, axis=-1))
 
+    def add(self, name: str, values: np.ndarray) -> None:
+        """A new field ``name`` with ``values`` for the current lanes."""
+        self.fields = self.fields + (name,)
+        setattr(self, name, values)
+
     def extend(self, other: "Lanes") -> None:
         """Append the lanes of ``other``."""
         for name in self.fields:

@@ -36,10 +36,15 @@ __all__ = ["AreaLight", "AreaTables", "DirectionalLight", "EmissionSample", "Env
            "LightContext", "LightSample", "LightSet", "MEASURES", "PointLight", "SELECTIONS", "SpotLight"]
 
 SELECTIONS = ("power", "uniform")
-# The kinds of [[lights]] tables in scene files; area lights are shapes' emitters.
+# The light interface before each kind became a model (issue 10), and what replaced each name.
+_RENAMED = {"sample": "sample_li", "pdf_hit": "pdf_li (of the emitting triangle's entity)",
+            "sample_emission": "sample_le", "origin_pdf": "pdf_le(...)[0]", "emission_pdf_dir": "pdf_le(...)[1]",
+            "emitted_toward": "le (times |cos| at area lights)", "environment_radiance": "le with environment_entity",
+            "pdf_environment": "pdf_li with environment_entity", "disk_center": "context.disk_center",
+            "disk_radius": "context.disk_radius", "others": "lights"}
+# The kinds of [[lights]] tables in scene files; area lights are shapes' emitters.  Entities are numbered
+# kind by kind: area lights first, then in this order.
 LIGHTS: dict[str, type[Light]] = {model.kind: model for model in (PointLight, SpotLight, DirectionalLight, Environment)}
-# Entities are numbered kind by kind in this order.
-_ORDER = (AreaLight,) + tuple(LIGHTS.values())
 
 
 class LightSet:
@@ -60,8 +65,13 @@ class LightSet:
         self.models: list[type[Light]] = []
         self.tables: list = []
         kind_of, index, power, light_id = [], [], [], []
+        order = (AreaLight,) + tuple(LIGHTS.values())
+        unknown = {type(light).__name__ for light in self.lights if type(light) not in order}
+        if unknown:
+            raise ValueError(f"lights: {', '.join(sorted(unknown))} is not a registered light model "
+                             f"(pathspace.lights.LIGHTS: {', '.join(LIGHTS)})")
         lights_before = 0  # light ids: the emitting triangles of an area light share one
-        for model in _ORDER:
+        for model in order:
             group = [light for light in self.lights if type(light) is model]
             if model is AreaLight:
                 self.area: AreaTables = model.tables(group, self.context)
@@ -93,6 +103,11 @@ class LightSet:
             if model.hit_by_escaping_rays:
                 self.environment = next(light for light in self.lights if type(light) is model)
                 self.environment_entity = int(np.flatnonzero(self.kind_of == k)[0])
+
+    def __getattr__(self, name: str):
+        if name in _RENAMED:
+            raise AttributeError(f"LightSet.{name} was renamed: use {_RENAMED[name]}")
+        raise AttributeError(name)
 
     @property
     def count(self) -> int:
@@ -193,13 +208,14 @@ class LightSet:
         point on it by ``measure``; the density includes the pmf."""
         entity = self.select(u[0], selection)
         pmf = self.pmf(selection).take(entity)
-
-        def call(model, tables, lanes, idx):
-            pick = (lambda a: a) if lanes is None else (lambda a: np.take(a, lanes, axis=-1))
-            return model.sample_li(tables, idx, pick(receivers), pick(u[1:3]),
-                                   colours if lanes is None else colours.take(lanes), measure)
-
-        sample = self._each(entity, call)
+        if len(self.models) == 1:
+            sample = self.models[0].sample_li(self.tables[0], self.index.take(entity), receivers, u[1:3], colours,
+                                              measure)
+        else:
+            def call(model, tables, lanes, idx):
+                return model.sample_li(tables, idx, np.take(receivers, lanes, axis=1), u[1:3, lanes],
+                                       colours.take(lanes), measure)
+            sample = self._each(entity, call)
         sample.pdf = sample.pdf * pmf
         sample.entity = entity
         return sample

@@ -27,6 +27,8 @@ class Scene:
     lights : area lights (emitting triangles) and the other lights
     shape_names : name of each shape (index = ``mesh.shape``)
     source : the file it was loaded from, if any
+    render_spp : the samples per pixel its ``[render]`` table asks for (None: the renderer's default)
+    fingerprint : a hash of its description and every file it loads (see ``toml_loader.fingerprint``)
     """
 
     camera: PinholeCamera
@@ -35,6 +37,8 @@ class Scene:
     lights: LightSet
     shape_names: list[str]
     source: str | None = None
+    render_spp: int | None = None
+    fingerprint: str = ""
 
     @cached_property
     def accel(self) -> Accel:

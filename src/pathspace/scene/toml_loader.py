@@ -10,6 +10,8 @@ field and what was expected; see :mod:`pathspace.fields`.
 """
 from __future__ import annotations
 
+import hashlib
+import json
 import os
 import tomllib
 from pathlib import Path
@@ -24,6 +26,7 @@ from ..lights import LIGHTS, AreaLight, LightSet
 from . import shapes as builtin
 from .mesh import TriangleMesh, triangle_cross
 from .model import Scene
+from .overrides import apply_overrides
 from .shapes import SHAPES
 
 __all__ = ["load_scene", "scene_from_dict", "FORMAT_VERSION"]
@@ -36,8 +39,13 @@ DEGENERATE_RELATIVE = 1e-10
 MAX_COORDINATE = 1e30
 
 
-def load_scene(path: str | os.PathLike) -> Scene:
-    """Load a scene from a TOML file; mesh and spectrum files are found relative to its folder."""
+def load_scene(path: str | os.PathLike, *, resolution: tuple[int, int] | None = None, spp: int | None = None,
+               **overrides: Any) -> Scene:
+    """Load a scene from a TOML file; mesh and spectrum files are found relative to its folder.
+
+    ``resolution``, ``spp`` and any ``overrides`` ({"materials.white.reflectance": [0.5, 0.5, 0.5], ...})
+    change the description before it is checked (see :mod:`pathspace.scene.overrides`).
+    """
     path = Path(path)
     if not path.is_file():
         raise SceneError(f"{path}: scene file not found")
@@ -47,7 +55,7 @@ def load_scene(path: str | os.PathLike) -> Scene:
         raise SceneError(f"{path}: not a valid TOML file: {error}") from None
     except UnicodeDecodeError as error:
         raise SceneError(f"{path}: not a UTF-8 text file: {error}") from None
-    return scene_from_dict(data, source=str(path), base_dir=path.parent)
+    return scene_from_dict(data, source=str(path), base_dir=path.parent, resolution=resolution, spp=spp, **overrides)
 
 
 def _model(fields: Fields, registry: dict, default: str | None = None):
@@ -56,15 +64,20 @@ def _model(fields: Fields, registry: dict, default: str | None = None):
     return registry[kind].from_fields(fields)
 
 
-def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>",
-                    base_dir: str | os.PathLike | None = None) -> Scene:
-    """Build a scene from the parsed contents of a scene file (a dict of the TOML structure)."""
+def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>", base_dir: str | os.PathLike | None = None,
+                    *, resolution: tuple[int, int] | None = None, spp: int | None = None, **overrides: Any) -> Scene:
+    """Build a scene from the parsed contents of a scene file (a dict of the TOML structure), after
+    applying ``resolution``, ``spp`` and ``overrides`` as :func:`load_scene` does."""
+    data = apply_overrides(data, {"resolution": resolution, "spp": spp, **overrides}, source)
     top = Fields(data, "", source, base_dir)
     version = top.integer("format", FORMAT_VERSION, low=1)
     if version != FORMAT_VERSION:
         raise top.error(f"this pathspace reads scene format {FORMAT_VERSION}, got {version}", "format")
     top.string("name", "")
     top.string("description", "")
+    render = top.sub("render", {})
+    render_spp = render.integer("spp", None, low=1) if render.has("spp") else None
+    render.finish()
     camera = _model(top.sub("camera"), CAMERAS, "pinhole")
     materials = top.sub("materials")
     names = list(materials.table)
@@ -77,13 +90,13 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>",
     light_list = top.raw("lights", [])
     if not isinstance(light_list, list):
         raise top.error("expected an array of tables ([[lights]])", "lights")
-    lights = [_model(Fields(table, f"lights[{i}]", source, top.base), LIGHTS) for i, table in enumerate(light_list)]
+    lights = [_model(top.reader(table, f"lights[{i}]"), LIGHTS) for i, table in enumerate(light_list)]
     environments = [i for i, light in enumerate(lights) if light.hit_by_escaping_rays]
     if len(environments) > 1:
         raise top.error(f"at most one environment light is supported, got {len(environments)} "
                         f"(lights{environments})", "lights")
     top.finish()
-    mesh, shape_names, emitters = _shapes(shape_list, names, source, top.base)
+    mesh, shape_names, emitters = _shapes(top, shape_list, names)
     # Lights at infinity: their power (for light selection) is what crosses the geometry's bounding sphere;
     # light tracing and BDPT start their rays on a disk outside a sphere that also holds a thin lens.
     lo, hi = mesh.bounds()
@@ -94,15 +107,25 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>",
     light_set = LightSet(emitters + lights, mesh, scene_radius=scene_radius, disk_center=0.5 * (lo + hi),
                          disk_radius=0.5 * float(np.linalg.norm(hi - lo)))
     return Scene(camera=camera, mesh=mesh, materials=material_table, lights=light_set, shape_names=shape_names,
-                 source=source)
+                 source=source, render_spp=render_spp, fingerprint=fingerprint(data, top.files))
 
 
-def _shapes(shape_list: list, material_names: list[str], source: str, base: Path):
+def fingerprint(data: dict, files: list[Path]) -> str:
+    """A hash of a scene description and of every file it loads (SHA-256, hexadecimal): equal for scenes
+    that render the same image."""
+    digest = hashlib.sha256(json.dumps(data, sort_keys=True, default=str).encode())
+    for path in sorted(set(files)):
+        digest.update(str(path.name).encode())
+        digest.update(path.read_bytes())
+    return digest.hexdigest()
+
+
+def _shapes(top: Fields, shape_list: list, material_names: list[str]):
     """The mesh of all shapes, their names, and the area lights of those that emit."""
     vertices, indices, material_ids, shape_ids, names, emitters = [], [], [], [], [], []
     offset = triangle_offset = 0
     for i, table in enumerate(shape_list):
-        shape = Fields(table, f"shapes[{i}]", source, base)
+        shape = top.reader(table, f"shapes[{i}]")
         name = shape.string("name", f"shapes[{i}]")
         if name != f"shapes[{i}]":
             shape.path = f"shapes[{i}] ({name!r})"

@@ -1,0 +1,109 @@
+"""Sweeps: one estimator over a grid of parameter settings, at equal time or equal spp, several seeds.
+
+Every cell of the grid (the cartesian product of the values given per
+parameter) renders once per seed.  The tidy table has one row per cell and
+seed: the parameters, spp, seconds, the image mean and its standard error,
+the variance per sample, the time per sample, every metric against the
+reference and the efficiencies 1 / (relMSE x seconds) and
+1 / (variance per sample x time per sample).  Per cell (:attr:`Sweep.cells`)
+the seeds are pooled and the pooled image is compared with the reference by
+the block-wise z-test (:func:`pathspace.validate.compare_estimates`): a
+setting whose mean disagrees with the reference beyond its error is flagged
+``biased`` -- a biased setting stays visible instead of being averaged away.
+"""
+from __future__ import annotations
+
+import itertools
+import json
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..metrics import METRICS
+from ..validate import compare_estimates
+from .convergence import pandas, reference_image
+from .specs import EstimatorSpec
+
+__all__ = ["Sweep", "sweep", "grid_cells"]
+
+
+def grid_cells(grid: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
+    """Every combination of the values of ``grid`` ({parameter: values}), in order."""
+    names = list(grid)
+    return [dict(zip(names, values)) for values in itertools.product(*(grid[n] for n in names))]
+
+
+@dataclass
+class Sweep:
+    """A sweep's tidy table (one row per cell and seed) and its per-cell summary with bias flags."""
+
+    table: Any
+    cells: Any
+    parameters: tuple[str, ...]
+
+    def best(self, by: str = "efficiency"):
+        """The unbiased cell with the highest mean ``by``."""
+        candidates = self.cells[~self.cells["biased"]]
+        return candidates.loc[candidates[by].idxmax()] if len(candidates) else None
+
+
+def sweep(scene, estimator: Any, grid: dict[str, Sequence[Any]], reference: Any, *, spp: int | None = None,
+          time: float | None = None, seeds: Sequence[int] = (0, 1), metrics: Sequence[str] = ("relmse", "mse"),
+          alpha: float = 1e-3, block: int = 8, threads: int | None = None, progress: bool = False) -> Sweep:
+    """Render ``estimator`` (a name, (name, fixed params) or spec) for every cell of ``grid`` and every seed,
+    with ``spp`` samples per pixel or ``time`` seconds each; see the module docstring."""
+    from ..driver import render
+
+    pd = pandas()
+    if (time is None) == (spp is None):
+        raise ValueError("give either time (seconds) or spp")
+    spec = EstimatorSpec.parse(estimator)
+    ref, ref_variance = reference_image(reference)
+    if ref_variance is None:
+        ref_variance = np.zeros_like(ref)
+    rows, cells = [], []
+    for cell in grid_cells(grid):
+        estimator_instance = spec.make(**cell)  # parameter errors surface here, before any render
+        results = []
+        for seed in seeds:
+            result = render(scene, estimator_instance, spp=spp, time=time, seed=seed, threads=threads,
+                            progress=progress)
+            results.append(result)
+            rows.append({**cell, "seed": seed, **_row(result, ref, metrics)})
+        cells.append({**cell, **_pooled(results, ref, ref_variance, alpha, block)})
+    table = pd.DataFrame(rows)
+    summary = pd.DataFrame(cells)
+    means = table.groupby(list(grid), sort=False)[["efficiency", "inverse_variance_time", *metrics]].mean()
+    summary = summary.merge(means.reset_index(), on=list(grid))
+    for frame in (table, summary):
+        frame.insert(0, "estimator", spec.label)
+        frame.insert(1, "fixed", json.dumps(spec.params, sort_keys=True, default=str))
+    return Sweep(table, summary, tuple(grid))
+
+
+def _row(result, reference: np.ndarray, metrics: Sequence[str]) -> dict:
+    """The statistics of one render."""
+    image, variance, stats = result.image, result.variance, result.stats
+    pixels = image.shape[0] * image.shape[1]
+    passes = max(stats["spp"], 1)
+    variance_per_sample = float(np.mean(variance) * passes)
+    time_per_sample = stats["seconds"] / (passes * pixels)
+    row = {"spp": stats["spp"], "seconds": stats["seconds"], "mean": float(image.mean()),
+           "mean_error": float(np.sqrt(variance.sum()) / variance.size),
+           "variance_per_sample": variance_per_sample, "time_per_sample": time_per_sample,
+           "inverse_variance_time": 1.0 / (variance_per_sample * time_per_sample)}
+    row.update({name: METRICS[name](image, reference) for name in metrics})
+    row["efficiency"] = 1.0 / (METRICS["relmse"](image, reference) * stats["seconds"])
+    return row
+
+
+def _pooled(results: list, reference: np.ndarray, reference_variance: np.ndarray, alpha: float, block: int) -> dict:
+    """The seeds of a cell pooled into one estimate, tested against the reference."""
+    image = np.mean([r.image for r in results], axis=0)
+    variance = np.mean([r.variance for r in results], axis=0) / len(results)
+    test = compare_estimates(image, variance, reference, reference_variance, block=block, alpha=alpha)
+    error = np.sqrt(variance.sum() + reference_variance.sum()) / image.size
+    return {"pooled_mean": float(image.mean()), "reference_mean": float(reference.mean()),
+            "mean_z": float((image.mean() - reference.mean()) / error) if error > 0 else 0.0,
+            "max_abs_z": float(test.max_abs_z), "biased": not test.passed}

@@ -1,0 +1,98 @@
+"""The shared random walk: the vertex densities it records are the densities of the directions it sampled.
+
+Subpaths store, for every vertex, the area density with which their own walk
+generated it (``fwd``) and with which the opposite walk would have (``rev``),
+both with the roulette's survival probability when the policy is local --
+at every vertex, also before ``rr_depth``, so that the densities are one
+function of the path whichever strategy formed it.
+Here they are recomputed independently from the vertex positions and the
+materials' own pdfs."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pathspace as ps
+from pathspace.bsdfs import MaterialLanes, Surface
+from pathspace.estimators.base import Counters
+from pathspace.estimators.bidirectional import STREAMS
+from pathspace.estimators.control import RenderControl
+from pathspace.estimators.subpaths import SURFACE
+from pathspace.estimators.walk import Dimensions
+from pathspace.sampler import StreamSamplers
+from pathspace.spectra import RGBColours, RGBMode
+from conftest import scene_dict
+
+
+def test_dimensions_name_the_rows_in_order():
+    dims = Dimensions(light=3, bsdf=3) + Dimensions(roulette=1)
+    u = np.arange(14.0).reshape(7, 2)
+    parts = dims.split(u)
+    assert dims.size == 7
+    np.testing.assert_array_equal(parts.bsdf, u[3:6])
+    np.testing.assert_array_equal(parts.roulette, u[6:7])
+
+
+def subpaths(name, **params):
+    scene = ps.scene_from_dict(scene_dict(name, (32, 32)))
+    bdpt = ps.estimators.make_estimator("bdpt", **params)
+    samplers = {stream: StreamSamplers(3).open([(0, 0, code)], [1024]) for stream, code in STREAMS.items()}
+    batch, _ = bdpt._subpaths(scene, RGBMode(), np.arange(1024), samplers, np.array([0, 1024]), Counters(), RenderControl())
+    return scene, bdpt, batch
+
+
+def walk_densities(scene, sub, roulette):
+    """(fwd, rev) of every surface vertex whose neighbours are surface vertices, recomputed."""
+    rows = []
+    for i in range(sub.count):
+        lane, index = sub.lane[i], sub.index[i]
+        nxt = i + 1
+        if index < 2 or nxt >= sub.count or sub.lane[nxt] != lane or sub.kind[i] != SURFACE or sub.kind[nxt] != SURFACE:
+            continue
+        prev, here = i - 1, i
+        if sub.delta[prev] or sub.delta[here] or sub.kind[prev] != SURFACE:
+            continue
+        rows.append((prev, here, nxt))
+    prev, here, nxt = (np.array(column) for column in zip(*rows))
+    # float32 positions of nearly coincident vertices (in corners) do not give their distance to 1e-4
+    apart = np.minimum(np.linalg.norm(sub.p[:, nxt] - sub.p[:, here], axis=0),
+                       np.linalg.norm(sub.p[:, prev] - sub.p[:, here], axis=0)) > 0.02
+    prev, here, nxt = prev[apart], here[apart], nxt[apart]
+
+    def pdf(at, toward, came_from):
+        p = sub.p.astype(np.float64)
+        wi = p[:, toward] - p[:, at]
+        wi /= np.linalg.norm(wi, axis=0)
+        wo = p[:, came_from] - p[:, at]
+        wo /= np.linalg.norm(wo, axis=0)
+        lanes = MaterialLanes(scene.materials, sub.material[at], RGBColours, {"diffuse_sampling": "cosine"})
+        return lanes.eval(Surface.facing(sub.n[:, at], -wo.astype(np.float32)), wi.astype(np.float32))[1]
+
+    def area(pdf_sa, frm, to):
+        d = sub.p[:, to].astype(np.float64) - sub.p[:, frm]
+        dist2 = (d * d).sum(0)
+        return pdf_sa * np.abs((sub.n[:, to] * d).sum(0)) / np.sqrt(dist2) / dist2
+
+    q = roulette(here)
+    fwd = area(pdf(here, nxt, prev) * q, here, nxt)      # the walk went prev -> here -> nxt
+    rev = area(pdf(here, prev, nxt) * q, here, prev)     # the opposite walk: nxt -> here -> prev
+    return nxt, fwd, prev, rev
+
+
+@pytest.mark.parametrize("params, local", [({"rr": "albedo"}, True), ({"rr": "fixed", "rr_probability": 0.3}, True),
+                                           ({"rr": "albedo", "rr_depth": 3}, True),
+                                           ({"rr": "throughput"}, False), ({"rr": "off"}, True)])
+def test_recorded_densities_are_the_sampled_ones(params, local):
+    scene, bdpt, batch = subpaths("cornell-box", **params)
+    for sub in (batch.eye, batch.light):
+        def roulette(v):
+            if not local or params["rr"] == "off":
+                return np.ones(v.size)
+            if params["rr"] == "fixed":
+                return np.full(v.size, 0.7)
+            return scene.materials.albedo[sub.material[v]]
+        nxt, fwd, prev, rev = walk_densities(scene, sub, roulette)
+        assert nxt.size > 100
+        np.testing.assert_allclose(sub.fwd[nxt], fwd, rtol=2e-4)
+        np.testing.assert_allclose(sub.rev[prev], rev, rtol=2e-4)
+        np.testing.assert_array_equal(sub.q[nxt - 1], roulette(nxt - 1))

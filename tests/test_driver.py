@@ -1,0 +1,138 @@
+"""The render driver and the estimator contract: progressive checkpoints, thread- and grouping-independent
+images, estimators that own their loop, failures inside workers, and the clock."""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+import pytest
+
+import pathspace as ps
+from pathspace.estimators import ESTIMATORS
+from pathspace.estimators.base import Estimator, ItemResult
+from conftest import scene_dict
+
+
+@pytest.fixture(scope="module")
+def small():
+    return ps.scene_from_dict(scene_dict("cornell-box-thin-lens", (12, 10)))
+
+
+@pytest.mark.parametrize("estimator", ["pt", "lt", "bdpt"])
+def test_a_checkpoint_equals_a_render_of_its_passes(small, estimator):
+    """Developing the film at 1, 3 and 8 passes of a 12-pass render gives, bit for bit, the renders of
+    1, 3 and 8 passes: one run serves every budget."""
+    seen = {}
+
+    def look(checkpoint):
+        seen[checkpoint.passes] = (checkpoint.film.mean().copy(), checkpoint.film.variance().copy())
+
+    final = ps.render(small, estimator, spp=12, seed=4, checkpoints=[1, 3, 8], on_checkpoint=look)
+    assert sorted(seen) == [1, 3, 8]
+    for passes, (mean, variance) in seen.items():
+        alone = ps.render(small, estimator, spp=passes, seed=4)
+        np.testing.assert_array_equal(mean, alone.film.mean())
+        np.testing.assert_array_equal(variance[np.isfinite(variance)], alone.film.variance()[np.isfinite(variance)])
+    np.testing.assert_array_equal(final.image, ps.render(small, estimator, spp=12, seed=4).image)
+
+
+@pytest.mark.parametrize("estimator", ["pt", "lt", "bdpt"])
+def test_images_do_not_depend_on_threads(small, estimator):
+    """Items group several passes of a small image; how many depends on the thread count, the image not."""
+    one = ps.render(small, estimator, spp=9, seed=2, threads=1, pyramid=2) if estimator != "pt" else \
+        ps.render(small, estimator, spp=9, seed=2, threads=1)
+    params = {"pyramid": 2} if estimator != "pt" else {}
+    two = ps.render(small, estimator, spp=9, seed=2, threads=2, **params)
+    np.testing.assert_array_equal(one.image, two.image)
+    if estimator != "pt":
+        for key in one.strategies:
+            np.testing.assert_array_equal(one.strategies[key]["weighted"], two.strategies[key]["weighted"])
+
+
+def test_time_checkpoints_see_whole_passes(small):
+    seen = []
+    result = ps.render(small, "pt", time=0.6, seed=1, checkpoints=[0.1, 0.3],
+                       on_checkpoint=lambda c: seen.append((c.passes, c.seconds, c.film.mean().copy())))
+    assert [s for _, s, _ in seen] == sorted(s for _, s, _ in seen) and len(seen) >= 1
+    for passes, seconds, mean in seen:
+        assert seconds >= 0.1 and 1 <= passes <= result.stats["spp"]
+        np.testing.assert_array_equal(mean, ps.render(small, "pt", spp=passes, seed=1).film.mean())
+
+
+def test_checkpoint_time_is_not_render_time(small):
+    """The clock stops while the film is looked at (and workers wait)."""
+    start = time.perf_counter()
+    result = ps.render(small, "pt", spp=40, seed=1, checkpoints=[10, 20, 30], on_checkpoint=lambda c: time.sleep(0.3))
+    wall = time.perf_counter() - start
+    assert result.stats["seconds"] < wall - 0.85
+
+
+def test_disjoint_pass_ranges_merge_to_the_whole(small):
+    whole = ps.render(small, "bdpt", spp=6, seed=3)
+    first = ps.render(small, "bdpt", spp=2, seed=3)
+    second = ps.render(small, "bdpt", spp=4, seed=3, first_pass=2)
+    first.film.merge(second.film)
+    np.testing.assert_allclose(first.film.mean(), whole.film.mean(), rtol=1e-12)
+    assert first.film.passes == 6
+
+
+@dataclasses.dataclass
+class Broken(Estimator):
+    """Fails in its second work item."""
+
+    name = "broken"
+
+    def plan(self, scene):
+        return ["fails"]
+
+    def render_items(self, job, next_item, counters):
+        while (item := next_item()) is not None:
+            if item.index == 1:
+                raise RuntimeError("deliberate failure in a worker")
+            yield ItemResult(item, np.zeros((3, item.pixels.size)))
+
+
+def test_a_failing_worker_stops_the_render(small):
+    with pytest.raises(RuntimeError, match="deliberate failure in a worker"):
+        ps.render(small, Broken(), spp=200, threads=2)
+
+
+@dataclasses.dataclass
+class Constant(Estimator):
+    """An estimator without passes: it owns its loop and writes every pixel's value as one splat per
+    'sample' -- the shape a Markov-chain estimator takes."""
+
+    value: float = 0.25
+    name = "constant"
+
+    def plan(self, scene):
+        return ["every pixel is the constant"]
+
+    def render(self, job, budget, on_checkpoint=None):
+        film = job.film
+        pixels = np.arange(film.pixel_count)
+        for k in range(budget.spp):
+            job.control.check()
+            film.add_splats(k, pixels, np.full((3, pixels.size), self.value))
+            film.add_samples(k, 0, np.zeros((3, pixels.size)))
+            if on_checkpoint is not None and k + 1 in budget.checkpoints:
+                on_checkpoint(ps.estimators.base.Checkpoint(k + 1, job.control.elapsed(), film))
+
+
+def test_an_estimator_may_own_its_loop(small, monkeypatch):
+    """Registered in one line, rendered by name, checkpointed like any other."""
+    monkeypatch.setitem(ESTIMATORS, "constant", Constant)
+    seen = []
+    result = ps.render(small, "constant", spp=5, value=0.5, checkpoints=[2], on_checkpoint=lambda c: seen.append(c.passes))
+    np.testing.assert_array_equal(result.image, 0.5)
+    assert np.all(result.variance == 0) and seen == [2] and result.stats["spp"] == 5
+
+
+def test_render_arguments_are_checked(small):
+    for kwargs, message in (({"spp": 0}, "spp: expected an integer >= 1"), ({"time": -1}, "time: expected"),
+                            ({"seed": -2}, "seed: expected an integer >= 0"), ({"threads": 0}, "threads"),
+                            ({"spp": 4, "time": 1.0}, "either spp or time"),
+                            ({"checkpoints": [0]}, "checkpoints: expected")):
+        with pytest.raises(ValueError, match=message):
+            ps.render(small, "pt", **kwargs)

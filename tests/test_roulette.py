@@ -1,0 +1,48 @@
+"""Russian roulette: one vocabulary for every estimator, and survival probabilities that mean one thing."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pathspace as ps
+from pathspace.bsdfs import Dielectric, Diffuse, MaterialTable, Mirror, Phong
+from pathspace.roulette import POLICIES, SPECULAR_CONTINUATION, RussianRoulette
+
+
+def test_survival_probabilities_of_each_policy():
+    depth = np.array([1, 2, 3, 4])
+    throughput = np.array([[0.2, 3.0, 0.5, 0.9], [0.1, 0.1, 0.7, 0.0], [0.0, 0.0, 0.0, 0.3]])
+    albedo = np.array([0.8, 0.5, 0.3, 1.2])
+    assert RussianRoulette("off", 1).survival(depth, throughput, albedo) is None
+    assert RussianRoulette("fixed", 5).survival(depth, throughput, albedo) is None  # nobody at depth 5 yet
+    np.testing.assert_array_equal(RussianRoulette("fixed", 3, probability=0.25).survival(depth, None, albedo),
+                                  [1.0, 1.0, 0.75, 0.75])
+    np.testing.assert_array_equal(RussianRoulette("albedo", 2).survival(depth, None, albedo), [1.0, 0.5, 0.3, 1.0])
+    np.testing.assert_array_equal(RussianRoulette("throughput", 1, cap=0.95).survival(depth, throughput, albedo),
+                                  [0.2, 0.95, 0.7, 0.9])
+
+
+def test_only_throughput_depends_on_the_walk():
+    assert [RussianRoulette(p).local for p in POLICIES] == [True, True, True, False]
+
+
+def test_material_albedo_bounds():
+    table = MaterialTable(["white", "glossy", "mirror", "glass"],
+                          [Diffuse((0.2, 0.8, 0.4)), Phong((0.3, 0.3, 0.3), (0.5, 0.6, 0.2), 10),
+                           Mirror((1.0, 1.0, 1.0)), Dielectric(1.5)])
+    np.testing.assert_allclose(table.albedo, [0.8, 0.9, SPECULAR_CONTINUATION, SPECULAR_CONTINUATION])
+
+
+@pytest.mark.parametrize("estimator", ["pt", "lt", "bdpt"])
+def test_every_estimator_takes_the_same_parameters_with_the_same_messages(estimator):
+    make = ps.estimators.make_estimator
+    made = make(estimator, rr="fixed", rr_depth=3, rr_probability=0.2, rr_cap=0.9)
+    assert made.roulette == RussianRoulette("fixed", 3, 0.2, 0.9)
+    for params, message in (({"rr": "sometimes"}, r"rr: expected one of \('off', 'fixed', 'albedo', 'throughput'\)"),
+                            ({"rr_depth": 0}, "rr_depth: expected an integer >= 1, got 0"),
+                            ({"rr_probability": 1.0}, r"rr_probability: expected a termination probability in \[0, 1\)"),
+                            ({"rr_cap": 0.0}, r"rr_cap: expected a survival cap in \(0, 1\]"),
+                            ({"max_depth": 0}, r"max_depth: expected -1 \(unbounded\) or an integer >= 1, got 0"),
+                            ({"diffuse_sampling": "sideways"}, "diffuse_sampling: expected one of")):
+        with pytest.raises(ValueError, match=message):
+            make(estimator, **params)
