@@ -31,6 +31,11 @@
  * light sample for s = 1, a lens sample for t = 1, a lens hit for t = 0), and
  * their own delta flags are not consulted where they end the path (s = 0: the
  * eye vertex that found the light; t = 0: the lens a light subpath hit).
+ *
+ * MIS over a subset of the strategies: an optional table allowed[s * size + t]
+ * (s, t < size) names the strategies that take part; the others get weight 0
+ * and are left out of every sum, so the weights of a path still add up to one
+ * over the strategies of the subset that can produce it.
  */
 #include "native.h"
 
@@ -81,8 +86,17 @@ typedef struct {
     int heuristic;
     double beta;
     int target_s, target_t;
+    const uint8_t *allowed;  /* NULL: every strategy takes part */
+    int allowed_size;
     double *out;
 } MisBatch;
+
+static inline int takes_part(const MisBatch *b, int s, int t)
+{
+    if (b->allowed == NULL)
+        return 1;
+    return s < b->allowed_size && t < b->allowed_size && b->allowed[(npy_intp)s * b->allowed_size + t];
+}
 
 /* The heuristic's term for a strategy whose probability is r times the current one's. */
 static inline double term(const Ratio *r, const MisBatch *b)
@@ -123,7 +137,8 @@ static double weight_of(const MisBatch *b, npy_intp m)
     /* A strategy that cannot produce the path has weight 0: it would connect through a delta vertex,
      * hit a light that cannot be hit (s = 0), or hit a camera that cannot be hit (t = 0). */
     if ((s == 0 && light_delta) || (t == 0 && b->camera_is_delta) || (s == 1 && t == 1 && no_11) ||
-        (s >= 1 && t >= 1 && s - 1 < light_len && ld[s - 1]) || (t >= 1 && s >= 1 && t - 1 < eye_len && ed[t - 1]))
+        (s >= 1 && t >= 1 && s - 1 < light_len && ld[s - 1]) || (t >= 1 && s >= 1 && t - 1 < eye_len && ed[t - 1]) ||
+        !takes_part(b, s, t))
         return 0.0;
     if (b->heuristic == H_NONE)
         return 1.0;
@@ -139,7 +154,7 @@ static double weight_of(const MisBatch *b, npy_intp m)
         ratio_times(&r, remap0(rev), remap0(fwd));
         int delta_here = i == t - 1 ? 0 : ed[i];
         int valid = i > 0 ? (!delta_here && !ed[i - 1]) : (!delta_here && !b->camera_is_delta);
-        if (valid && !(i == 1 && no_11))
+        if (valid && !(i == 1 && no_11) && takes_part(b, s + t - i, i))
             sum += term(&r, b);
     }
     /* Light side: move the split toward the light (s' = s-1 .. 0). */
@@ -151,7 +166,7 @@ static double weight_of(const MisBatch *b, npy_intp m)
         ratio_times(&r, remap0(rev), remap0(fwd));
         int delta_here = i == s - 1 ? 0 : ld[i];
         int delta_before = i > 0 ? ld[i - 1] : light_delta;
-        if (!delta_here && !delta_before && !(i == 1 && no_11))
+        if (!delta_here && !delta_before && !(i == 1 && no_11) && takes_part(b, i, s + t - i))
             sum += term(&r, b);
     }
     return 1.0 / (1.0 + sum);
@@ -180,14 +195,15 @@ PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs)
     static char *kwlist[] = {"s", "t", "lane", "light_offset", "light_fwd", "light_rev", "light_delta",
                              "eye_offset", "eye_fwd", "eye_rev", "eye_delta", "light_flags",
                              "qs_fwd", "qs_rev", "qs_minus_rev", "pt_fwd", "pt_rev", "pt_minus_rev",
-                             "camera_is_delta", "heuristic", "beta", "target_s", "target_t", NULL};
+                             "camera_is_delta", "heuristic", "beta", "target_s", "target_t", "allowed", NULL};
     PyObject *o[18];
+    PyObject *allowed_obj = Py_None;
     int camera_is_delta = 0, heuristic = H_POWER, target_s = -1, target_t = -1;
     double beta = 2.0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOOOOOOOOOO|$pidii:mis_weights", kwlist, &o[0], &o[1],
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOOOOOOOOOOOOOO|$pidiiO:mis_weights", kwlist, &o[0], &o[1],
                                      &o[2], &o[3], &o[4], &o[5], &o[6], &o[7], &o[8], &o[9], &o[10], &o[11], &o[12],
                                      &o[13], &o[14], &o[15], &o[16], &o[17], &camera_is_delta, &heuristic, &beta,
-                                     &target_s, &target_t))
+                                     &target_s, &target_t, &allowed_obj))
         return NULL;
     if (heuristic < H_BALANCE || heuristic > H_NONE) {
         PyErr_SetString(PyExc_ValueError, "mis_weights: unknown heuristic code");
@@ -198,7 +214,16 @@ PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs)
         return NULL;
     }
     PyArrayObject *a[18] = {NULL};
+    PyArrayObject *allowed = NULL;
     PyObject *result = NULL;
+    if (allowed_obj != Py_None) {
+        allowed = (PyArrayObject *)PyArray_FROMANY(allowed_obj, NPY_UINT8, 2, 2, NPY_ARRAY_C_CONTIGUOUS | NPY_ARRAY_ALIGNED);
+        if (allowed == NULL || PyArray_DIM(allowed, 0) != PyArray_DIM(allowed, 1) || PyArray_DIM(allowed, 0) > 1 << 20) {
+            PyErr_Clear();
+            PyErr_SetString(PyExc_ValueError, "mis_weights: allowed must be a square (size, size) array of flags");
+            goto done;
+        }
+    }
     static const int types[18] = {NPY_INT32, NPY_INT32, NPY_INT64, NPY_INT64, NPY_DOUBLE, NPY_DOUBLE, NPY_UINT8,
                                   NPY_INT64, NPY_DOUBLE, NPY_DOUBLE, NPY_UINT8, NPY_UINT8, NPY_DOUBLE, NPY_DOUBLE,
                                   NPY_DOUBLE, NPY_DOUBLE, NPY_DOUBLE, NPY_DOUBLE};
@@ -254,6 +279,7 @@ PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs)
         (const double *)PyArray_DATA(a[14]), (const double *)PyArray_DATA(a[15]),
         (const double *)PyArray_DATA(a[16]), (const double *)PyArray_DATA(a[17]),
         camera_is_delta, heuristic, beta, target_s, target_t,
+        allowed ? (const uint8_t *)PyArray_DATA(allowed) : NULL, allowed ? (int)PyArray_DIM(allowed, 0) : 0,
         (double *)PyArray_DATA((PyArrayObject *)result),
     };
     Py_BEGIN_ALLOW_THREADS
@@ -263,5 +289,6 @@ PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs)
 done:
     for (int k = 0; k < 18; ++k)
         Py_XDECREF(a[k]);
+    Py_XDECREF(allowed);
     return result;
 }

@@ -65,3 +65,14 @@ def cornell() -> ps.Scene:
 def cornell_small() -> ps.Scene:
     """The Cornell box at 64 x 64."""
     return ps.scene_from_dict(cornell_dict((64, 64)), source="cornell-64")
+
+
+def no_nonfinite(result) -> bool:
+    """Neither a pixel sample nor a connection was dropped for a NaN or Inf."""
+    return result.stats["nonfinite"] == 0 and result.stats["nonfinite_contributions"] == 0
+
+
+def mean_and_error(result, channel=0) -> tuple[float, float]:
+    """Mean over pixels of one channel and its standard error (pixels are independent)."""
+    values = result.image[..., channel]
+    return values.mean(), np.sqrt(result.variance[..., channel].sum()) / values.size

@@ -1,9 +1,11 @@
-"""Cameras: direction density (chi-square), importance normalisation, raster projection, thin lens."""
+"""Cameras: direction density (chi-square), importance normalisation, raster projection, thin lens, and the
+conventions (orientation, field of view, which side of the image the Cornell box's red wall is on)."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
+import pathspace as ps
 from pathspace.camera import PinholeCamera, ThinLensCamera
 from pathspace.validate import chi2_test_directions
 
@@ -123,3 +125,28 @@ def test_rays_can_hit_the_thin_lens_but_not_the_pinhole():
     miss_dir = (beside - receivers) / np.linalg.norm(beside - receivers, axis=0)
     assert not camera.intersect_lens(receivers, miss_dir)[1].any()
     assert not CAMERAS["pinhole"].intersect_lens(receivers, direction)[1].any()
+
+
+
+def test_camera_orientation_and_fov():
+    cam = PinholeCamera([0, 0, 3.9], [0, 0, 0], [0, 1, 0], 40.0, 200, 100, fov_axis="x")
+    centre = np.array([50 * 200 + 100])  # pixel (x=100, y=50): its top-left corner is the image centre
+    _, d = cam.generate_rays(centre, np.zeros((2, 1)))
+    np.testing.assert_allclose(d[:, 0], [0, 0, -1], atol=1e-7)
+    # Left edge of the image looks toward -x at half the horizontal fov; top edge toward +y.
+    _, left = cam.generate_rays(np.array([50 * 200]), np.array([[0.0], [0.0]]))
+    np.testing.assert_allclose(np.degrees(np.arctan2(-left[0, 0], -left[2, 0])), 20.0, rtol=1e-5)
+    _, top = cam.generate_rays(np.array([100]), np.zeros((2, 1)))
+    assert top[1, 0] > 0
+    # fov_axis = "y" puts the angle on the vertical axis; "smaller" picks y for a wide image.
+    tall = PinholeCamera([0, 0, 3.9], [0, 0, 0], [0, 1, 0], 40.0, 200, 100, fov_axis="smaller")
+    _, up = tall.generate_rays(np.array([100]), np.zeros((2, 1)))
+    np.testing.assert_allclose(np.degrees(np.arctan2(up[1, 0], -up[2, 0])), 20.0, rtol=1e-5)
+
+
+def test_cornell_box_image_orientation(cornell_small):
+    """The red wall (world -x) appears on the left of the image, the green one on the right."""
+    image = ps.render(cornell_small, spp=4, seed=1, max_depth=2).image
+    left, right = image[32, 2], image[32, -3]
+    assert left[0] > 2 * left[1] and right[1] > 2 * right[0]
+

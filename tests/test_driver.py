@@ -52,7 +52,7 @@ def test_images_do_not_depend_on_threads(small, estimator):
 
 def test_time_checkpoints_see_whole_passes(small):
     seen = []
-    result = ps.render(small, "pt", time=0.6, seed=1, checkpoints=[0.1, 0.3],
+    result = ps.render(small, "pt", time=1.5, seed=1, checkpoints=[0.1, 0.3],
                        on_checkpoint=lambda c: seen.append((c.passes, c.seconds, c.film.mean().copy())))
     assert [s for _, s, _ in seen] == sorted(s for _, s, _ in seen) and len(seen) >= 1
     for passes, seconds, mean in seen:

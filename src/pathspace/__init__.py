@@ -4,24 +4,35 @@
     scene = ps.load_scene("scenes/cornell-box/scene.toml")
     result = ps.render(scene, estimator="pt", spp=64, seed=1)
     result.image, result.variance, result.stats
+    ref = ps.reference(scene, spp=4096)                      # cached
+    ps.metrics.relmse(result.image, ref.image)
+    ps.experiment.converge(scene, ["pt", "bdpt"], ref, time=10).plot()
 """
-from . import estimators, integrators  # integrators: the old name of estimators, pointing to the new names
+__version__ = "0.1.0"
+
+from . import estimators, experiment, integrators, metrics, plot  # integrators: the old name, pointing to the new
 from ._native import default_thread_count
 from .accel import Accel, Hits
-from .film import Film
 from .driver import RenderResult, render
+from .film import Film
+from .reference import Reference, reference
 from .scene import Scene, SceneError, load_scene, scene_from_dict
 
 __all__ = [
     "Accel",
     "Film",
     "Hits",
+    "Reference",
     "RenderResult",
     "Scene",
     "SceneError",
     "default_thread_count",
+    "estimators",
+    "experiment",
     "load_scene",
+    "metrics",
+    "plot",
+    "reference",
     "render",
     "scene_from_dict",
 ]
-__version__ = "0.1.0"

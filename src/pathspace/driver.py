@@ -8,6 +8,7 @@ restarting it.
 """
 from __future__ import annotations
 
+import base64
 import os
 import re
 from dataclasses import dataclass, field
@@ -83,6 +84,22 @@ class RenderResult:
                 out.setdefault((s, t), {})[kind] = self.film.layer_mean(name, self.film.to_srgb)
         return dict(sorted(out.items())) or None
 
+    def __repr__(self) -> str:
+        s = self.stats
+        return (f"RenderResult({s['estimator']}, {s['mode']}, {s['spp']} spp, {s['width']}x{s['height']}, "
+                f"{s['seconds']:.2f} s{', %d warning(s)' % len(s['warnings']) if s['warnings'] else ''})")
+
+    def _repr_html_(self) -> str:
+        """In Jupyter: the tone-mapped image and the summary line."""
+        from html import escape
+
+        from .imageio import png_bytes
+
+        encoded = base64.b64encode(png_bytes(self.image)).decode("ascii")
+        width = max(self.stats["width"], 256)
+        return (f'<img src="data:image/png;base64,{encoded}" style="width:{width}px;image-rendering:pixelated"/>'
+                f"<pre>{escape(self.summary())}</pre>")
+
     def summary(self) -> str:
         """One line: estimator, spp, time and throughput, and anything dropped."""
         s = self.stats
@@ -107,8 +124,8 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
            samplers: SamplerSource | None = None, **params: Any) -> RenderResult:
     """Render ``scene`` with an estimator (a name and its ``params``, or an :class:`Estimator`).
 
-    ``spp`` samples (passes) per pixel (default: the scene's ``[render]`` spp, else 16), or ``time``: passes are
-    started until that many seconds have passed (at least one runs).
+    ``spp`` samples (passes) per pixel (default: the scene's ``[render]`` spp, else 16), or ``time``: the
+    passes complete within that many seconds of rendering (work in flight then is dropped).
     ``seed`` seeds every random stream: the same seed gives the same image.
     ``threads``: workers (default: every core this process may use).
     ``first_pass``: renders of disjoint pass ranges with the same seed are
@@ -150,6 +167,9 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
     seconds = job.control.elapsed()
     warnings = (estimator.warnings(scene) + second_moment_warnings(film)
                 + path_length_warnings(job.counters.longest, job.counters.truncated))
+    if not film.passes:
+        warnings.append(f"no pass was complete when the time budget ({time:g} s) ran out: the image is empty; "
+                        "give more time (one pass of this scene takes longer)")
     samples, counters = int(film.count.sum()), job.counters
     stats = {"estimator": estimator.name, "params": estimator.params, "plan": estimator.plan(scene),
              "spp": film.passes, "seed": seed, "first_pass": first_pass, "threads": threads,

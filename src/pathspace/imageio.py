@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["write_exr", "read_exr", "write_png", "to_srgb8", "display"]
+__all__ = ["write_exr", "read_exr", "write_png", "png_bytes", "to_srgb8", "display"]
 
 METADATA_PREFIX = "pathspace."
 
@@ -125,6 +125,17 @@ def display(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
 def to_srgb8(image: np.ndarray, exposure: float = 0.0) -> np.ndarray:
     """Linear RGB (H, W, 3) -> 8-bit sRGB: the :func:`display` image rounded to 8 bits."""
     return np.round(display(image, exposure) * 255.0).astype(np.uint8)
+
+
+def png_bytes(image: np.ndarray, exposure: float = 0.0) -> bytes:
+    """The 8-bit sRGB PNG of linear RGB (H, W, 3), in memory (see :func:`to_srgb8`)."""
+    from io import BytesIO
+
+    from PIL import Image
+
+    buffer = BytesIO()
+    Image.fromarray(to_srgb8(_check_image(image, "image"), exposure), mode="RGB").save(buffer, format="PNG")
+    return buffer.getvalue()
 
 
 def write_png(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.0) -> None:

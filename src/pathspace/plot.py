@@ -142,7 +142,8 @@ def convergence_plot(convergence, metric: str = "relmse", x: str = "seconds", ax
     for label, runs in table.groupby("estimator", sort=False):
         stats = runs.groupby(runs.groupby("seed").cumcount())  # the k-th snapshot of every seed
         xs, mean = stats[x].mean(), stats[metric].mean()
-        line, = ax.plot(xs, mean, marker="o", markersize=3, label=f"{label} (slope {slopes[label]:.2f})")
+        slope = f"slope {slopes[label]:.2f}" if label in slopes.index else "too few snapshots for a slope"
+        line, = ax.plot(xs, mean, marker="o", markersize=3, label=f"{label} ({slope})")
         if runs["seed"].nunique() > 1:
             ax.fill_between(xs, stats[metric].min(), stats[metric].max(), color=line.get_color(), alpha=0.2)
     ax.set_xscale("log")

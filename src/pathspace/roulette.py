@@ -19,10 +19,11 @@ the estimate stays unbiased for any q in (0, 1].  Policies (``rr``):
                   and a survivor's throughput is lifted back toward 1 (pbrt-v4's
                   rule, cap 1).  The throughput read is free of the 1 / eta^2
                   scaling of radiance by refraction (as Mitsuba 3 does): light
-                  inside glass is not less important for being inside.  At
-                  specular vertices q is capped at 0.9 as under "albedo": a
+                  inside glass is not less important for being inside.  A
                   walk trapped in glass by total internal reflection keeps a
-                  throughput of 1 and would otherwise never end.  A light
+                  throughput of 1 and goes on until it escapes (any survival
+                  below 1 there would give the escaping light weights that grow
+                  without bound: infinite variance where it escapes rarely).  A light
                   subpath's throughput is measured relative to the ray leaving
                   the light, so that the choice does not depend on the light's
                   units.  Mitsuba 3 caps every vertex at 0.95, which gives
@@ -33,7 +34,7 @@ the estimate stays unbiased for any q in (0, 1].  Policies (``rr``):
 "off", "fixed" and "albedo" are *local*: past ``rr_depth``, q depends only on
 the vertex's material, the same whichever direction a walk passes the
 vertex, so bidirectional estimators include it in the vertex densities that
-their MIS weights compare (as SmallVCM does; :meth:`RussianRoulette.local_survival`).
+their MIS weights compare (as SmallVCM does; :meth:`RussianRoulette.mis_survival`).
 Those densities must be one function of the path for every strategy -- or
 the weights of a path no longer sum to one and the image is biased -- so
 they take q at every vertex, also where a walk had not yet reached
@@ -89,25 +90,23 @@ class RussianRoulette:
                 "throughput": f"survival probability = max throughput, capped at {self.cap:g}"}[self.policy]
         return f"Russian roulette from depth {self.start_depth}: {rule}"
 
-    def local_survival(self, albedo: np.ndarray) -> np.ndarray | None:
-        """q of a local policy at vertices of materials with ``albedo`` (N,), past ``rr_depth``: what
-        multiple importance sampling puts in the vertex densities; None for "throughput" and "off" (1)."""
+    def mis_survival(self, albedo: np.ndarray) -> np.ndarray:
+        """q as multiple importance sampling puts it in the vertex densities, at vertices of materials with
+        ``albedo`` (N,): a local policy's survival past ``rr_depth``, whatever the depth; 1 for
+        "throughput" and "off"."""
         if self.policy == "fixed":
             return np.full(albedo.shape, 1.0 - self.probability)
         if self.policy == "albedo":
             return np.clip(albedo, 0.0, 1.0)
-        return None
+        return np.ones(albedo.shape)
 
-    def survival(self, depth: np.ndarray, throughput: np.ndarray | None, albedo: np.ndarray,
-                 specular: np.ndarray | None = None) -> np.ndarray | None:
+    def survival(self, depth: np.ndarray, throughput: np.ndarray | None, albedo: np.ndarray) -> np.ndarray | None:
         """Survival probabilities (N,) at vertices reached after ``depth`` (N,) segments, or None (all survive).
 
         ``throughput`` (C, N) is the walk's throughput including this
         vertex's sample weight (read by "throughput" only; None otherwise
         allowed); ``albedo`` (N,) the albedo of each vertex's material
-        (see :attr:`pathspace.bsdfs.MaterialTable.albedo`); ``specular`` (N,)
-        whether the vertex sampled a delta lobe ("throughput" caps those at
-        ``SPECULAR_CONTINUATION``).
+        (see :attr:`pathspace.bsdfs.MaterialTable.albedo`).
         """
         if self.policy == "off" or depth.max(initial=0) < self.start_depth:
             return None
@@ -117,8 +116,6 @@ class RussianRoulette:
             q = np.clip(albedo, 0.0, 1.0)
         else:
             q = np.clip(throughput.max(axis=0), 0.0, self.cap)
-            if specular is not None and self.cap > SPECULAR_CONTINUATION:
-                q = np.where(specular, np.minimum(q, SPECULAR_CONTINUATION), q)
         return np.where(depth >= self.start_depth, q, 1.0)
 
 

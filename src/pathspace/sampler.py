@@ -6,7 +6,12 @@ A sampler serves a wavefront of lanes, one row of numbers per dimension:
 
 ``draw(k)``      k uniform numbers in [0, 1) per live lane, a (k, lanes) float64 array;
 ``keep(idx)``    only the lanes ``idx`` (increasing) stay alive -- call it whenever lanes end;
-``extend(s)``    the lanes of another sampler join (after the existing ones).
+``extend(s)``    the lanes of another sampler join (after the existing ones);
+``split(idx)``   the lanes ``idx`` leave for a sampler of their own (which is returned).
+
+A lane's numbers depend only on its unit and on the order of the draws its
+unit's lanes make, wherever those lanes are: a unit's lanes split over two
+samplers draw from the same stream, in the order the samplers draw.
 
 Lanes belong to *units* named by integer keys: one tile of pixels in one
 pass, and for estimators with several independent streams (camera subpath,
@@ -58,6 +63,9 @@ class Sampler(Protocol):
     def extend(self, other: "Sampler") -> None:
         """Append the lanes of ``other`` (a sampler of the same kind) after the live lanes."""
 
+    def split(self, indices: np.ndarray) -> "Sampler":
+        """Remove the lanes at ``indices`` (increasing) and return a sampler of them, in that order."""
+
 
 class SamplerSource(Protocol):
     """Opens samplers for the lanes of units."""
@@ -78,7 +86,13 @@ def _check_units(keys: Sequence[Key], counts: Sequence[int]) -> None:
 
 
 class StreamSampler:
-    """Independent uniforms for lanes grouped in units, one Generator per unit (lanes ordered unit by unit)."""
+    """Independent uniforms for lanes grouped in units, one Generator per unit.
+
+    Lanes are ordered segment by segment: a segment is a run of lanes that
+    draw from one Generator (a unit, or the part of a unit that joined by
+    :meth:`extend` or :meth:`split`); two segments may share a Generator and
+    then draw from it in their order.
+    """
 
     def __init__(self, seed: int, keys: Sequence[Key] = (), counts: Sequence[int] = ()) -> None:
         _check_units(keys, counts)
@@ -109,12 +123,35 @@ class StreamSampler:
         """Only the lanes at ``indices`` (increasing, of the current live lanes) stay alive."""
         self.unit = self.unit.take(indices)
         self.counts = np.bincount(self.unit, minlength=len(self.generators))
+        if len(self.generators) > 8 and np.count_nonzero(self.counts) < len(self.generators) // 2:
+            self._compact()
+
+    def _compact(self) -> None:
+        """Forget the segments without live lanes (renumbering the others in order)."""
+        live = np.flatnonzero(self.counts)
+        renumber = np.zeros(len(self.generators), dtype=np.int64)
+        renumber[live] = np.arange(live.size)
+        self.generators = [self.generators[j] for j in live]
+        self.unit = renumber.take(self.unit)
+        self.counts = self.counts.take(live)
 
     def extend(self, other: "StreamSampler") -> None:
-        """Append the lanes (and units) of ``other``."""
+        """Append the lanes (and segments) of ``other``."""
         self.unit = np.concatenate([self.unit, other.unit + len(self.generators)])
         self.counts = np.concatenate([self.counts, other.counts])
         self.generators = self.generators + other.generators
+
+    def split(self, indices: np.ndarray) -> "StreamSampler":
+        """The lanes ``indices`` leave, as a sampler of their own drawing from the same Generators."""
+        part = StreamSampler(self.seed)
+        part.generators = self.generators
+        part.unit = self.unit.take(indices)
+        part.counts = np.bincount(part.unit, minlength=len(self.generators))
+        part._compact()
+        rest = np.ones(self.lanes, dtype=bool)
+        rest[indices] = False
+        self.keep(np.flatnonzero(rest))
+        return part
 
 
 class StreamSamplers:
@@ -203,6 +240,15 @@ class RecordingSampler:
         self.lane = np.concatenate([self.lane, other.lane])
         self.unit_keys = self.unit_keys + other.unit_keys
 
+    def split(self, indices: np.ndarray) -> "RecordingSampler":
+        """The lanes ``indices`` leave, still recording."""
+        part = RecordingSampler(self.inner.split(indices), self.recording, [], [])
+        part.unit_keys, part.unit, part.lane = self.unit_keys, self.unit.take(indices), self.lane.take(indices)
+        rest = np.ones(self.unit.size, dtype=bool)
+        rest[indices] = False
+        self.unit, self.lane = self.unit[rest], self.lane[rest]
+        return part
+
 
 class RecordingSamplers:
     """Wraps a source; every number drawn from the samplers it opens is kept in ``recording``."""
@@ -265,6 +311,15 @@ class ReplaySampler:
     def keep(self, indices: np.ndarray) -> None:
         """Keep the lanes ``indices``."""
         self.row, self.cursor = self.row.take(indices), self.cursor.take(indices)
+
+    def split(self, indices: np.ndarray) -> "ReplaySampler":
+        """The lanes ``indices`` leave, with their rows and positions."""
+        part = ReplaySampler(self.numbers, self.rest)
+        part.row, part.cursor = self.row.take(indices), self.cursor.take(indices)
+        rest = np.ones(self.row.size, dtype=bool)
+        rest[indices] = False
+        self.row, self.cursor = self.row[rest], self.cursor[rest]
+        return part
 
     def extend(self, other: "ReplaySampler") -> None:
         """Append the lanes of ``other`` (its rows are appended to ``numbers``)."""

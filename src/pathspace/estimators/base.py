@@ -146,9 +146,9 @@ class ItemResult:
 
 @dataclass
 class Budget:
-    """How long a render runs: ``spp`` passes, or passes started until ``seconds`` have passed (at
-    least one), from pass ``first_pass`` on; ``checkpoints``: sorted pass counts or seconds (as
-    ``checkpoint_unit`` says) at which the film is developed."""
+    """How long a render runs: ``spp`` passes, or the passes completed within ``seconds`` (work still
+    in flight then is dropped), from pass ``first_pass`` on; ``checkpoints``: sorted pass counts or
+    seconds (as ``checkpoint_unit`` says) at which the film is developed."""
 
     spp: int | None = None
     seconds: float | None = None

@@ -22,12 +22,14 @@ mis : "power" (default), "balance", "uniform", "single" or "none"
 mis_beta : float, default 2
     Exponent of the power heuristic.
 strategy : (s, t), for mis="single"
-rr : "albedo" (default), "fixed" or "off"
-    Russian roulette on both subpaths with a local continuation probability
-    per material (albedo bound, or 1 - ``rr_probability``), the same in both
-    directions, so it enters the vertex densities MIS compares.
-rr_probability : float in [0, 1), default 0.5
-    Termination probability of "fixed".
+mis_strategies : None (all), a condition such as "s != 0 and t != 0", or [[s, t], ...]
+    MIS over a subset of the strategies: the others get weight 0 and the
+    weights are renormalised over the subset (see :class:`pathspace.mis.StrategySubset`).
+rr, rr_depth, rr_probability, rr_cap : "albedo" (default), 1, 0.5, 1.0
+    Russian roulette on both subpaths (see :mod:`pathspace.roulette`); the
+    local policies enter the vertex densities MIS compares.
+light_rr, light_rr_depth, light_rr_probability, light_rr_cap : None
+    The light subpaths' own roulette (None: as the camera subpaths').
 diffuse_sampling : "cosine" (default) or "uniform"
 pyramid : int, default 0
     Record, for every path length up to this many segments and every
@@ -55,6 +57,7 @@ class BDPT(Bidirectional):
     mis: str = p.mis_heuristic("power")
     mis_beta: float = p.mis_beta()
     strategy: tuple | None = p.mis_strategy()
+    mis_strategies: object = p.mis_strategies()
 
     name = "bdpt"
     uses_lens_hits = True
@@ -63,6 +66,8 @@ class BDPT(Bidirectional):
         super().__post_init__()
         self.mis, self.mis_beta, self.strategy = check_heuristic(self.mis, self.mis_beta, self.strategy,
                                                                  max_depth=self.max_depth)
+        if self.mis == "single" and self.mis_strategies is not None:
+            raise ValueError("mis_strategies: not used with mis='single' (which keeps one strategy already)")
 
     def plan(self, scene) -> list[str]:
         """What this estimator will do on ``scene``, and what it leaves out and why."""
@@ -71,8 +76,9 @@ class BDPT(Bidirectional):
                    "uniform": "uniform weights over the strategies that can produce each path",
                    "single": f"only strategy (s, t) = {self.strategy}",
                    "none": "no MIS: every strategy weighted 1 (the image is the sum of the strategies)"}[self.mis]
-        lines = [f"bidirectional path tracing, max_depth={depth}; {weights}",
-                 f"{self.roulette.describe()} (local, in the vertex densities)"]
+        if self.mis_strategies is not None:
+            weights += f", over the strategies {self.mis_strategies.spec!r} only (the others get weight 0)"
+        lines = [f"bidirectional path tracing, max_depth={depth}; {weights}", self._roulette_plan()]
         camera, lights = scene.camera, scene.lights
         lines.append("pinhole camera: no t = 0 strategy (rays cannot hit it)" if camera.delta_position
                      else "thin-lens camera: t = 0 strategy (light subpaths passing through the lens)")
@@ -100,4 +106,4 @@ class BDPT(Bidirectional):
         return mis_weights(part, SubpathPdfs(light.offset, light.fwd, light.rev, light.delta),
                            SubpathPdfs(eye.offset, eye.fwd, eye.rev, eye.delta), part.flags,
                            batch.scene.camera.delta_position, self.mis, self.mis_beta,
-                           self.strategy if self.strategy is not None else (-1, -1))
+                           self.strategy if self.strategy is not None else (-1, -1), subset=self.mis_strategies)

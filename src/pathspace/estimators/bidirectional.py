@@ -76,9 +76,14 @@ class Bidirectional(Estimator):
     rr_depth: int = p.roulette_depth(1)
     rr_probability: float = p.roulette_probability()
     rr_cap: float = p.roulette_cap()
+    light_rr: str | None = p.light_rr()
+    light_rr_depth: int | None = p.light_rr_depth()
+    light_rr_probability: float | None = p.light_rr_probability()
+    light_rr_cap: float | None = p.light_rr_cap()
     diffuse_sampling: str = p.diffuse_sampling()
     pyramid: int = p.pyramid()
     roulette: RussianRoulette = field(init=False, repr=False)
+    light_roulette: RussianRoulette = field(init=False, repr=False)
 
     uses_camera_subpaths = True
     uses_lens_hits = True
@@ -86,10 +91,22 @@ class Bidirectional(Estimator):
     def __post_init__(self) -> None:
         super().__post_init__()
         self.roulette = RussianRoulette(self.rr, self.rr_depth, self.rr_probability, self.rr_cap)
+        self.light_roulette = RussianRoulette(*(own if own is not None else camera for own, camera in (
+            (self.light_rr, self.rr), (self.light_rr_depth, self.rr_depth),
+            (self.light_rr_probability, self.rr_probability), (self.light_rr_cap, self.rr_cap))))
+
+    def _roulette_plan(self) -> str:
+        if self.roulette == self.light_roulette or not self.uses_camera_subpaths:
+            return f"{self.light_roulette.describe()} on the subpaths (local policies: in the vertex densities)"
+        return (f"camera subpaths: {self.roulette.describe()}; light subpaths: {self.light_roulette.describe()} "
+                "(local policies: in the vertex densities)")
 
     def warnings(self, scene) -> list[str]:
         """Roulette settings with infinite variance on ``scene``."""
-        return roulette_warnings(self.roulette, scene.materials, self.max_depth)
+        found = roulette_warnings(self.light_roulette, scene.materials, self.max_depth)
+        if self.uses_camera_subpaths and self.roulette != self.light_roulette:
+            found = roulette_warnings(self.roulette, scene.materials, self.max_depth) + found
+        return found
 
     @property
     def depth_limit(self) -> int:
@@ -167,7 +184,7 @@ class Bidirectional(Estimator):
         state = Lanes(mode.path_fields, **mode.start(samplers["wavelengths"].draw(mode.camera_dims)))
         colours = mode.colours(state)
         settings = SubpathSettings(scene, colours, {"diffuse_sampling": self.diffuse_sampling}, self.roulette,
-                                   self.depth_limit + 1, counters, control)
+                                   self.light_roulette, self.depth_limit + 1, counters, control)
         eye = camera_subpaths(settings, pixels, samplers["camera"]) if self.uses_camera_subpaths else None
         lens = self.uses_lens_hits and not scene.camera.delta_position
         light, hits = light_subpaths(settings, count, samplers["light"], lens)

@@ -161,7 +161,7 @@ def light_samples(batch: Batch) -> Contributions | None:
     origin, pdf_emit = lights.pdf_le(entity, normal, -wi)
     cos_here = np.abs(dot(z.n, wi)).astype(np.float64)
     pt_rev = np.where(infinite, pdf_emit * cos_here, to_area(pdf_emit, z.n, wi, dist2))
-    pt_minus_rev = _at_previous(reverse_pdf(batch.materials(z), z.n, wi, z.wo) * z.q, z)
+    pt_minus_rev = _at_previous(reverse_pdf(batch.materials(z), z.n, wi, z.wo) * z.q_rev, z)
     return Contributions.make(z.lane, 1, z.index + 1, value, qs_fwd=origin, qs_rev=qs_rev, pt_fwd=z.fwd,
                               pt_rev=pt_rev, pt_minus_rev=pt_minus_rev, flags=lights.flags.take(entity))
 
@@ -203,7 +203,7 @@ def lens_samples(batch: Batch) -> Contributions | None:
     # 1 / (A cos^3) is We lens_area cos (see pathspace.camera).
     qs_rev = to_area(we * camera.lens_area * np.abs(camera.cos_to_axis(-wi)), y.n, wi, dist2)
     # y_{s-2} as the camera walk would go on to it (nothing for s = 1: pdf_back and g_prev are 0 there).
-    qs_minus_rev = _at_previous(pdf_back * y.q, y)
+    qs_minus_rev = _at_previous(pdf_back * y.q_rev, y)
     return Contributions.make(y.lane, y.index + 1, 1, value, raster=raster[:, useful], qs_fwd=y.fwd, qs_rev=qs_rev,
                               qs_minus_rev=qs_minus_rev, pt_fwd=np.full(y.size, 1.0 / camera.lens_area),
                               pt_rev=pt_rev, flags=batch.lane_flags.take(y.lane))
@@ -319,7 +319,7 @@ def _join(batch: Batch, y: Vertices, z: Vertices) -> Contributions | None:
     return Contributions.make(
         y.lane, y.index + 1, z.index + 1, value,
         qs_fwd=y.fwd, qs_rev=to_area(pdf_z * z.q, y.n, w, dist2),
-        qs_minus_rev=_at_previous(reverse_pdf(batch.materials(y), y.n, w, y.wo) * y.q, y),
+        qs_minus_rev=_at_previous(reverse_pdf(batch.materials(y), y.n, w, y.wo) * y.q_rev, y),
         pt_fwd=z.fwd, pt_rev=to_area(pdf_y * y.q, z.n, w, dist2),
-        pt_minus_rev=_at_previous(reverse_pdf(batch.materials(z), z.n, -w, z.wo) * z.q, z),
+        pt_minus_rev=_at_previous(reverse_pdf(batch.materials(z), z.n, -w, z.wo) * z.q_rev, z),
         flags=batch.lane_flags.take(y.lane))

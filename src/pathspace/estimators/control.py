@@ -6,10 +6,10 @@ the render runs, waits while it is paused (the render loop pauses it while
 ``on_checkpoint`` looks at the film, so that the time spent developing
 snapshots is not render time, and the work done meanwhile is small), and
 raises :class:`Interrupted` once the render has been cancelled (another
-worker failed, or the user stopped it) or -- with a time budget, once a
-first pass is complete -- its deadline has passed: a running item checks the
-clock, so a budget is met however long the paths are (the unfinished work
-is dropped; the film holds whole passes only).
+worker failed, or the user stopped it) or -- with a time budget -- its
+deadline has passed: a running item checks the clock, so a budget is met
+however long the paths are (the unfinished work is dropped; the film holds
+whole passes only, possibly none: the render then says so).
 """
 from __future__ import annotations
 
@@ -33,8 +33,7 @@ class RenderControl:
         self._running = threading.Event()
         self._running.set()
         self.reason = ""  # why the render was cancelled; empty while it runs
-        self.deadline: float | None = None  # render seconds after which check() stops the workers ...
-        self.may_stop = False               # ... once the render may stop (a first pass is complete)
+        self.deadline: float | None = None  # render seconds after which check() stops the workers
 
     def start(self) -> None:
         """Start the clock."""
@@ -76,5 +75,5 @@ class RenderControl:
             self._running.wait()
         if self.reason:
             raise Interrupted(self.reason)
-        if self.may_stop and self.deadline is not None and self.elapsed() >= self.deadline:
+        if self.deadline is not None and self.elapsed() >= self.deadline:
             raise Interrupted("the time budget is spent")

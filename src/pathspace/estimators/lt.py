@@ -34,7 +34,7 @@ class LightTracer(Bidirectional):
     def plan(self, scene) -> list[str]:
         """What this estimator will do on ``scene``, and what it leaves out and why."""
         depth = "unbounded" if self.max_depth < 0 else self.max_depth
-        lines = [f"light tracing, max_depth={depth}; {self.roulette.describe()}"]
+        lines = [f"light tracing, max_depth={depth}", self._roulette_plan()]
         delta = scene.materials.delta_names
         if delta:
             lines.append(f"specular materials ({', '.join(delta)}): paths reaching the camera only through them "

@@ -11,12 +11,13 @@ from functools import partial
 from ..bsdfs import DIFFUSE_SAMPLING
 from ..checks import choice, integer, number
 from ..lights import MEASURES, SELECTIONS
-from ..mis import HEURISTICS
+from ..mis import HEURISTICS, StrategySubset
 from ..roulette import POLICIES
 from .base import parameter
 
-__all__ = ["max_depth", "roulette_policy", "roulette_depth", "roulette_probability", "roulette_cap", "mis_heuristic",
-           "mis_beta", "mis_strategy", "diffuse_sampling", "light_selection", "light_measure", "pyramid"]
+__all__ = ["max_depth", "roulette_policy", "roulette_depth", "roulette_probability", "roulette_cap", "light_rr", "light_rr_depth", "light_rr_probability", "light_rr_cap",
+           "mis_heuristic", "mis_beta", "mis_strategy", "mis_strategies", "diffuse_sampling", "light_selection",
+           "light_measure", "pyramid"]
 
 
 def max_depth(default: int = -1):
@@ -48,6 +49,40 @@ def roulette_cap(default: float = 1.0):
     """Largest survival probability of the "throughput" policy."""
     return parameter(default, "largest survival probability of rr='throughput'",
                      partial(number, low=0.0, high=1.0, low_open=True, what="a survival cap in (0, 1]"))
+
+
+def _or_none(check):
+    return lambda value, name: None if value is None else check(value, name)
+
+
+def light_rr():
+    """The light subpaths' own roulette policy; None: ``rr``."""
+    return parameter(None, "roulette policy of light subpaths (default: rr)", _or_none(partial(choice, options=POLICIES)))
+
+
+def light_rr_depth():
+    """The light subpaths' ``rr_depth``; None: ``rr_depth``."""
+    return parameter(None, "rr_depth of light subpaths (default: rr_depth)", _or_none(partial(integer, low=1)))
+
+
+def light_rr_probability():
+    """The light subpaths' ``rr_probability``; None: ``rr_probability``."""
+    return parameter(None, "rr_probability of light subpaths (default: rr_probability)",
+                     _or_none(partial(number, low=0.0, high=1.0, high_open=True,
+                                      what="a termination probability in [0, 1)")))
+
+
+def light_rr_cap():
+    """The light subpaths' ``rr_cap``; None: ``rr_cap``."""
+    return parameter(None, "rr_cap of light subpaths (default: rr_cap)",
+                     _or_none(partial(number, low=0.0, high=1.0, low_open=True, what="a survival cap in (0, 1]")))
+
+
+def mis_strategies():
+    """The strategies BDPT's MIS combines (see :class:`pathspace.mis.StrategySubset`)."""
+    return parameter(None, "the strategies MIS combines (default: all): a condition on s, t and k = s + t - 1 such "
+                           "as 's != 0 and t != 0', or a list of [s, t] pairs; the others get weight 0",
+                     _or_none(lambda value, name: StrategySubset(value)))
 
 
 def mis_heuristic(default: str, options: tuple[str, ...] = HEURISTICS):

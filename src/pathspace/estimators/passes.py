@@ -21,8 +21,11 @@ from .control import Interrupted
 
 __all__ = ["render_passes", "work_layout"]
 
-# With a time budget, items hold 1 / TIMED_ITEM_SHARE of the lanes they would otherwise.
+# With a time budget, items hold at most 1 / TIMED_ITEM_SHARE of the lanes they would otherwise, and a
+# small image's passes are grouped into items that take a worker about TIMED_ITEM_SECONDS of the budget.
 TIMED_ITEM_SHARE = 4
+TIMED_ITEM_SECONDS = 0.1
+TIMED_FIRST_LANES = 4096  # the first items' lanes: fewer would spend their time in per-bounce overhead
 
 
 def work_layout(pixel_count: int, passes: int | None, workers: int, tile_pixels: int) -> tuple[int, int]:
@@ -30,35 +33,58 @@ def work_layout(pixel_count: int, passes: int | None, workers: int, tile_pixels:
     about ``tile_pixels`` lanes.
 
     Small images pack several passes into an item, but no more than keeps
-    every worker busy when the number of ``passes`` is known, and with a time
-    budget (``passes`` None) a quarter as many -- work in flight at the
-    deadline is dropped, so it is cut finer.  The grouping changes neither
-    the random streams nor the order in which samples reach the film.
+    every worker busy when the number of ``passes`` is known.  With a time
+    budget (``passes`` None) items hold a quarter as many lanes -- work in
+    flight at the deadline is dropped, and an item's last steps (connections,
+    splats) run between clock checks, so it is cut finer.  The grouping
+    changes neither the random streams nor the order in which samples reach
+    the film.
     """
+    if passes is None:
+        tile_pixels = max(1, tile_pixels // TIMED_ITEM_SHARE)
     tiles = -(-pixel_count // tile_pixels)
     tile = -(-pixel_count // tiles)
     if tiles > 1:
         return tile, 1
     if passes is None:
-        return tile, max(1, tile_pixels // (TIMED_ITEM_SHARE * pixel_count))
+        return tile, max(1, tile_pixels // pixel_count)
     return tile, min(max(1, tile_pixels // pixel_count), max(1, -(-passes // (2 * workers))))
 
 
-def _pass_groups(passes: Iterator[int], size: int, first: int, breaks: set[int]) -> Iterator[range]:
-    """Consecutive passes in groups of at most ``size``; a group also ends after pass ``first + b - 1``
+def _pass_groups(passes: Iterator[int], size: Callable[[], int], first: int, breaks: set[int]) -> Iterator[range]:
+    """Consecutive passes in groups of at most ``size()``; a group also ends after pass ``first + b - 1``
     for every b in ``breaks`` (so that checkpoints fall between groups)."""
     group: list[int] = []
     for p in passes:
         group.append(p)
-        if len(group) == size or p - first + 1 in breaks:
+        if len(group) >= size() or p - first + 1 in breaks:
             yield range(group[0], group[-1] + 1)
             group = []
     if group:
         yield range(group[0], group[-1] + 1)
 
 
-def _work_items(job: RenderJob, budget: Budget, tile: int, per_item: int) -> Iterator[WorkItem]:
-    """Work items in order: passes until the budget is spent, each group of passes tile by tile."""
+class _TimedItemSize:
+    """Passes per item under a time budget, from the items' own durations: starting from ``first``
+    passes, the size doubles while a worker's last item took under half of TIMED_ITEM_SECONDS of the budget and halves
+    while it took over twice that (a pass's cost is known only once passes have run)."""
+
+    def __init__(self, seconds: float, first: int, largest: int) -> None:
+        self.target, self.largest, self.size = TIMED_ITEM_SECONDS * seconds, largest, min(first, largest)
+
+    def __call__(self) -> int:
+        return self.size
+
+    def observe(self, seconds: float, passes: int) -> None:
+        """A worker finished an item of ``passes`` passes in ``seconds``."""
+        if seconds < 0.5 * self.target and passes >= self.size:
+            self.size = min(self.largest, 2 * self.size)
+        elif seconds > 2.0 * self.target:
+            self.size = max(1, self.size // 2)
+
+
+def _work_items(job: RenderJob, budget: Budget, tile: int, size: Callable[[], int]) -> Iterator[WorkItem]:
+    """Work items in order: passes until the budget is spent, each group of ``size()`` passes tile by tile."""
     control, pixel_count = job.control, job.film.pixel_count
 
     def passes() -> Iterator[int]:
@@ -70,7 +96,7 @@ def _work_items(job: RenderJob, budget: Budget, tile: int, per_item: int) -> Ite
 
     breaks = {int(c) for c in budget.checkpoints} if budget.checkpoint_unit == "spp" else set()
     index = 0
-    for group in _pass_groups(passes(), per_item, budget.first_pass, breaks):
+    for group in _pass_groups(passes(), size, budget.first_pass, breaks):
         for start in range(0, pixel_count, tile):
             yield WorkItem(index, group, start // tile, start, min(start + tile, pixel_count))
             index += 1
@@ -102,17 +128,27 @@ def render_passes(estimator, job: RenderJob, budget: Budget,
     """Render ``budget`` with ``estimator.render_items`` on ``job.threads`` workers into ``job.film``."""
     film, control = job.film, job.control
     tile, per_item = work_layout(film.pixel_count, budget.spp, job.threads, estimator.tile_pixels)
-    items = _work_items(job, budget, tile, per_item)
+    timed = None
+    if budget.seconds is not None:
+        timed = _TimedItemSize(budget.seconds, -(-TIMED_FIRST_LANES // tile), per_item)
+    items = _work_items(job, budget, tile, timed or (lambda: per_item))
     lock, done = threading.Lock(), threading.Condition()
     results: dict[int, ItemResult] = {}
     failures: list[BaseException] = []
     counters = [Counters() for _ in range(job.threads)]
     running = [job.threads]
+    handed: dict[int, tuple[float, int]] = {}  # thread -> (clock, passes) of the item it took last
 
     def next_item() -> WorkItem | None:
         control.check()
         with lock:
-            return next(items, None)
+            now, thread = control.elapsed(), threading.get_ident()
+            if timed is not None and thread in handed:
+                timed.observe(now - handed[thread][0], handed[thread][1])
+            item = next(items, None)
+            if item is not None:
+                handed[thread] = (now, len(item.passes))
+            return item
 
     def work(k: int) -> None:
         try:
@@ -147,7 +183,6 @@ def render_passes(estimator, job: RenderJob, budget: Budget,
             expected += 1
             before = film.passes
             result.deliver(film)
-            control.may_stop = film.passes > 0
             if job.progress is not None and film.passes > before:
                 job.progress.update(film.passes - before)
             checkpoints.update()

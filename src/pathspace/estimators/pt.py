@@ -76,6 +76,11 @@ CAMERA_DIMENSIONS = Dimensions(pixel=2, lens=2)
 SAFETY_DEPTH = 10_000
 # New work items join the wavefront while fewer paths than this are alive.
 REFILL = TILE_PIXELS // 8
+# Paths this deep (light trapped in glass by total internal reflection, mostly) leave the wavefront for a small
+# one that takes DEEP_STEPS bounces per bounce of the large one: a long path must not hold its work item
+# (and every item after it) for thousands of bounces of the whole wavefront.
+DEEP_DEPTH = 32
+DEEP_STEPS = 256
 PATH_FIELDS = WALK_FIELDS + ("ticket", "radiance")
 
 
@@ -175,7 +180,7 @@ class PathTracer(Estimator):
         """Render work items on one persistent wavefront: new items join whenever fewer than ``REFILL``
         paths are alive, and an item is yielded as soon as its last path ends."""
         bounce = self._bounce_context(job.scene, job.mode, counters)
-        walk = None
+        walk = deep = None
         exhausted = False
         while True:
             job.control.check()
@@ -184,20 +189,34 @@ class PathTracer(Estimator):
                 if item is None:
                     exhausted = True
                     break
-                sampler = job.samplers.open(item.keys, item.counts)
-                new = self._start(bounce, item.pixels, sampler, bounce.book.open(item, item.pixels.size))
+                new = self._start(bounce, item.pixels, job.samplers.open(item.keys, item.counts),
+                                  bounce.book.open(item, item.pixels.size))
                 if walk is None:
                     walk = new
                 else:
-                    walk.lanes.extend(new.lanes)
-                    walk.sampler.extend(sampler)
-            if walk is None or not walk.size:
+                    walk.extend(new)
+            if walk is None or not (walk.size or (deep is not None and deep.size)):
                 break
-            self._bounce(walk, bounce)
-            counters.rays += walk.rays
-            walk.rays = 0
+            deep = self._advance(walk, deep, bounce)
+            counters.rays += walk.rays + deep.rays
+            walk.rays = deep.rays = 0
             for item, values in bounce.book.finished():
                 yield ItemResult(item, values)
+
+    def _advance(self, walk: Walk, deep: Walk | None, bounce: "_Bounce") -> Walk:
+        """One bounce of the wavefront, then up to DEEP_STEPS bounces of its deep paths; returns the deep walk."""
+        if walk.size:
+            self._bounce(walk, bounce)
+        going = np.flatnonzero(walk.lanes.depth >= DEEP_DEPTH)
+        if deep is None:
+            deep = walk.split(going)
+        elif going.size:
+            deep.extend(walk.split(going))
+        for _ in range(DEEP_STEPS):
+            if not deep.size:
+                break
+            self._bounce(deep, bounce)
+        return deep
 
     def evaluate(self, scene, pixels: np.ndarray, sampler: Sampler, mode=None) -> np.ndarray:
         """Film values (3, N) of the paths through ``pixels`` (N,) built from ``sampler``'s numbers (a
@@ -207,8 +226,9 @@ class PathTracer(Estimator):
         self.check(scene)
         bounce = self._bounce_context(scene, mode, Counters())
         walk = self._start(bounce, np.asarray(pixels, dtype=np.int64), sampler, bounce.book.open("paths", len(pixels)))
-        while walk.size:
-            self._bounce(walk, bounce)
+        deep = None
+        while walk.size or deep.size:
+            deep = self._advance(walk, deep, bounce)
         return bounce.book.finished()[0][1]
 
     def _bounce_context(self, scene, mode, counters: Counters) -> _Bounce:
@@ -268,8 +288,7 @@ class PathTracer(Estimator):
         u = walk.draw()
         materials = MaterialLanes(scene.materials, arrival.material, colours, {"diffuse_sampling": self.diffuse_sampling})
         if bounce.strategy in ("mis", "nee"):
-            lanes.radiance += self._next_event(scene, materials, arrival, lanes.beta, u.light, colours)
-            walk.rays += lanes.size
+            self._light_samples(walk, materials, arrival, u.light, colours, bounce)
         sample = materials.sample(arrival.surface, u.bsdf)
         # Roulette reads the BSDF sample's weight (an albedo estimate): a mixture weight f / p_mix is
         # tiny exactly where a bright light about to be hit makes up for it, and would end such paths.
@@ -330,6 +349,21 @@ class PathTracer(Estimator):
         lanes.radiance[:, escaped] += np.take(lanes.beta, escaped, axis=1) * env
 
     # -- light sampling ----------------------------------------------------------------------------
+
+    def _light_samples(self, walk: Walk, materials, arrival: Arrival, u, colours, bounce: _Bounce) -> None:
+        """Next-event estimation at the lanes whose material is not specular (which could use no light sample)."""
+        lanes, scene = walk.lanes, bounce.scene
+        if materials.delta is None:
+            lanes.radiance += self._next_event(scene, materials, arrival, lanes.beta, u, colours)
+            walk.rays += lanes.size
+            return
+        todo = np.flatnonzero(~materials.delta)
+        if todo.size:
+            subset = MaterialLanes(scene.materials, arrival.material.take(todo), colours.take(todo),
+                                   {"diffuse_sampling": self.diffuse_sampling})
+            lanes.radiance[:, todo] += self._next_event(scene, subset, arrival.keep(todo),
+                                                        np.take(lanes.beta, todo, axis=1), u[:, todo], colours.take(todo))
+            walk.rays += todo.size
 
     def _next_event(self, scene, materials, arrival: Arrival, beta, u, colours) -> np.ndarray:
         """Light-sampled direct illumination of every lane, MIS-weighted against BSDF sampling; (C, N).

@@ -56,7 +56,7 @@ SURFACE, CAMERA, LIGHT = 0, 1, 2
 # Subpaths still growing at this many vertices are cut (and counted): only lossless traps get there.
 SAFETY_VERTICES = 10_000
 FIELDS = ("lane", "index", "p", "n", "eps", "wo", "beta", "fwd", "rev", "g_prev", "delta", "kind", "material",
-          "entity", "q", "infinite", "u")
+          "entity", "q", "q_rev", "infinite", "u")
 # The numbers drawn: at the lens (film position, lens point), at the light (light choice, point and
 # direction; the lens sample that joins vertex 0 to the camera), and per vertex (the BSDF sample, the
 # roulette, and what this vertex's connections use: a light sample, or a lens sample).
@@ -97,7 +97,9 @@ class Subpaths:
     vertex), ``beta`` (C, V), ``fwd``, ``rev``, ``delta``, ``kind`` (SURFACE,
     CAMERA, LIGHT), ``material`` (-1 off surfaces), ``entity`` (the light
     entity of light vertices and of surface vertices on emitters, else -1),
-    ``q`` (survival probability as MIS sees it), ``infinite``, ``u`` (its
+    ``q`` and ``q_rev`` (the survival probability of its own walk and of the
+    opposite walk there, as MIS sees them: see :mod:`pathspace.roulette`),
+    ``infinite``, ``u`` (its
     connections' uniforms), ``g_prev`` (what turns a solid-angle density of
     leaving the vertex toward its predecessor into an area density there:
     |cos| / d^2 at the predecessor, |cos| alone from a vertex at infinity, 1
@@ -121,6 +123,7 @@ class Subpaths:
     material: np.ndarray
     entity: np.ndarray
     q: np.ndarray
+    q_rev: np.ndarray
     infinite: np.ndarray
     u: np.ndarray
     terminated: np.ndarray
@@ -202,7 +205,8 @@ class SubpathSettings:
     scene: object
     colours: object
     options: dict
-    roulette: RussianRoulette
+    camera_roulette: RussianRoulette
+    light_roulette: RussianRoulette
     max_vertices: int
     counters: Counters
     control: RenderControl
@@ -222,8 +226,8 @@ class _Recorder:
         record = dict(lane=lanes, index=np.full(count, index, dtype=np.int64), kind=np.full(count, kind, dtype=np.int8),
                       rev=np.zeros(count), eps=np.zeros(count, np.float32), wo=np.zeros((3, count), np.float32),
                       g_prev=np.zeros(count), material=np.full(count, -1, np.int64),
-                      entity=np.full(count, -1, np.int64), q=np.ones(count), infinite=np.zeros(count, bool),
-                      delta=np.zeros(count, bool))
+                      entity=np.full(count, -1, np.int64), q=np.ones(count), q_rev=np.ones(count),
+                      infinite=np.zeros(count, bool), delta=np.zeros(count, bool))
         record.update(fields)
         self.records.append(record)
         return record
@@ -241,8 +245,10 @@ class _Recorder:
 class _Growth:
     """Subpaths growing by the shared walk from vertex 1 on, recording every vertex."""
 
-    def __init__(self, settings: SubpathSettings, walk: Walk, recorder: _Recorder, record: dict, lanes: int) -> None:
+    def __init__(self, settings: SubpathSettings, walk: Walk, opposite: RussianRoulette, recorder: _Recorder,
+                 record: dict, lanes: int) -> None:
         self.settings, self.walk, self.recorder, self.previous = settings, walk, recorder, record
+        self.opposite = opposite  # the roulette of walks in the other direction (for the reverse densities)
         self.terminated = np.zeros(lanes, bool)
         self.lens_hits: list[dict] | None = None   # light walks through a thin lens: rays that hit it
         self.escapes = False                       # camera walks with an environment: vertices at infinity
@@ -281,12 +287,12 @@ class _Growth:
             fwd = self._mis_pdf() * np.abs(arrival.cos).astype(np.float64) / np.where(lanes.prev_infinite, 1.0, dist2)
             g_prev = np.where(lanes.prev_infinite, 1.0, cos_at(lanes.prev_n, lanes.direction) / dist2)
         u = walk.draw()
-        q = walk.mis_survival(arrival)
+        q, q_rev = walk.mis_survival(arrival), walk.mis_survival(arrival, self.opposite)
         emitter = settings.scene.lights.area.emitter_of_triangle
         record = self.recorder.add(lanes.lane, index, SURFACE, p=arrival.p, n=arrival.normal, eps=arrival.eps,
                                    wo=-lanes.direction, beta=lanes.beta, fwd=fwd, g_prev=g_prev,
                                    material=arrival.material.astype(np.int64), entity=emitter.take(arrival.prim), q=q,
-                                   u=u.connect, delta=table.delta.take(arrival.material))
+                                   q_rev=q_rev, u=u.connect, delta=table.delta.take(arrival.material))
         if index + 1 >= settings.max_vertices:
             if settings.max_vertices >= SAFETY_VERTICES:
                 settings.counters.truncated += walk.size
@@ -294,7 +300,7 @@ class _Growth:
         materials = MaterialLanes(table, arrival.material, settings.colours.take(lanes.lane), settings.options)
         sample = materials.sample(arrival.surface, u.bsdf, walk.transport)
         # The previous vertex as the opposite walk would generate it from here (Veach 1997, eq. 10.7).
-        pdf_back = np.where(sample.delta, 0.0, reverse_pdf(materials, arrival.normal, sample.wi, -lanes.direction)) * q
+        pdf_back = np.where(sample.delta, 0.0, reverse_pdf(materials, arrival.normal, sample.wi, -lanes.direction)) * q_rev
         self.previous["rev"][np.searchsorted(self.previous["lane"], lanes.lane)] = pdf_back * g_prev
         if sample.terminated is not None:
             self.terminated[lanes.lane[sample.terminated]] = True
@@ -357,7 +363,8 @@ def camera_subpaths(settings: SubpathSettings, pixels: np.ndarray, sampler) -> S
     lanes = _walk_lanes(count, origin=origin, direction=direction, tmin=np.zeros(count, np.float32),
                         beta=np.ones((channels, count)), pdf=camera.pdf_direction(direction, origin), prev_n=axis,
                         prev_infinite=np.zeros(count, bool))
-    growth = _Growth(settings, Walk(scene, lanes, sampler, settings.roulette, CAMERA_VERTEX), recorder, record, count)
+    walk = Walk(scene, lanes, sampler, settings.camera_roulette, CAMERA_VERTEX)
+    growth = _Growth(settings, walk, settings.light_roulette, recorder, record, count)
     growth.escapes = scene.lights.environment is not None
     growth.run()
     settings.counters.rays += growth.walk.rays
@@ -390,13 +397,13 @@ def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool) -
     with np.errstate(divide="ignore", invalid="ignore"):
         pdf = np.where(e.infinite, e.pdf_pos / pmf, e.pdf_dir)
     extra = {}
-    if settings.roulette.policy == "throughput":  # the throughput is measured relative to the ray leaving the light
+    if settings.light_roulette.policy == "throughput":  # the throughput is measured relative to the light's ray
         start = beta.max(axis=0)
         extra["rr_scale"] = np.divide(1.0, start, out=np.zeros_like(start), where=start > 0)
     lanes = _walk_lanes(count, origin=e.point.astype(np.float32), direction=e.direction, tmin=e.tmin, beta=beta,
                         pdf=pdf, prev_n=e.normal, prev_infinite=e.infinite, **extra)
-    growth = _Growth(settings, Walk(scene, lanes, sampler, settings.roulette, LIGHT_VERTEX, "importance"), recorder,
-                     record, count)
+    walk = Walk(scene, lanes, sampler, settings.light_roulette, LIGHT_VERTEX, "importance")
+    growth = _Growth(settings, walk, settings.camera_roulette, recorder, record, count)
     growth.lens_hits = [] if lens else None
     growth.run()
     settings.counters.rays += growth.walk.rays

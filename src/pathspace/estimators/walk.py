@@ -142,6 +142,17 @@ class Walk:
         direction = self.lanes.direction
         return Arrival(prim, t, p, normal, eps, -dot(normal, direction), direction, self.scene.mesh.material.take(prim))
 
+    def split(self, indices: np.ndarray) -> "Walk":
+        """The lanes ``indices`` (with their sampler) leave for a walk of their own."""
+        return Walk(self.scene, self.lanes.split(indices), self.sampler.split(indices), self.roulette, self.dims,
+                    self.transport)
+
+    def extend(self, other: "Walk") -> None:
+        """The lanes (and sampler) of ``other`` join this walk."""
+        self.lanes.extend(other.lanes)
+        self.sampler.extend(other.sampler)
+        self.rays += other.rays
+
     def survival(self, hit: Arrival, sample: BSDFSample, weight: np.ndarray | None = None) -> np.ndarray | None:
         """Roulette's survival probabilities at ``hit`` for the BSDF ``sample`` there (whose ``weight`` the
         throughput takes, unless another is given), or None (all survive)."""
@@ -154,14 +165,12 @@ class Walk:
             if self.transport == "radiance":   # undo the 1 / eta^2 of refractions (see pathspace.roulette)
                 scale = lanes.eta_scale if sample.eta is None else lanes.eta_scale * sample.eta * sample.eta
                 throughput = throughput * scale
-        return roulette.survival(lanes.depth, throughput, self.scene.materials.albedo.take(hit.material),
-                                 sample.delta)
+        return roulette.survival(lanes.depth, throughput, self.scene.materials.albedo.take(hit.material))
 
-    def mis_survival(self, hit: Arrival) -> np.ndarray:
-        """q at ``hit`` as multiple importance sampling sees it (N,): the survival probability of a local
-        roulette policy past ``rr_depth``, whatever the depth; 1 for others (see :mod:`pathspace.roulette`)."""
-        q = self.roulette.local_survival(self.scene.materials.albedo.take(hit.material))
-        return np.ones(self.size) if q is None else q
+    def mis_survival(self, hit: Arrival, roulette: RussianRoulette | None = None) -> np.ndarray:
+        """q at ``hit`` as multiple importance sampling sees it (N,), under this walk's roulette or another
+        (the opposite walk's; see :meth:`pathspace.roulette.RussianRoulette.mis_survival`)."""
+        return (roulette or self.roulette).mis_survival(self.scene.materials.albedo.take(hit.material))
 
     def scatter(self, hit: Arrival, sample: BSDFSample, u_roulette: np.ndarray, survival: np.ndarray | None,
                 q_mis: np.ndarray | None = None) -> np.ndarray:

@@ -77,6 +77,14 @@ class Lanes:
         for name in self.fields:
             setattr(self, name, None if name in stale else np.take(getattr(self, name), indices, axis=-1))
 
+    def split(self, indices: np.ndarray) -> "Lanes":
+        """Remove the lanes ``indices`` (increasing) and return them as lanes of their own."""
+        part = Lanes(self.fields, **{name: np.take(getattr(self, name), indices, axis=-1) for name in self.fields})
+        rest = np.ones(self.size, dtype=bool)
+        rest[indices] = False
+        self.keep(np.flatnonzero(rest))
+        return part
+
     def add(self, name: str, values: np.ndarray) -> None:
         """A new field ``name`` with ``values`` for the current lanes."""
         self.fields = self.fields + (name,)

@@ -58,13 +58,14 @@ class Convergence:
     metrics: tuple[str, ...]
     images: dict = field(default_factory=dict, repr=False)
 
-    def slopes(self, metric: str = "relmse", x: str = "seconds"):
+    def slopes(self, metric: str = "relmse", x: str = "seconds", start: float = 0.1):
         """Per estimator: the fitted slope of log(metric) against log(x), mean and standard error over seeds
-        (-1 is the Monte Carlo rate of an unbiased estimator)."""
+        (-1 is the Monte Carlo rate of an unbiased estimator), over the snapshots past ``start`` of each run
+        (its first tenth is dominated by start-up: threads, the first items in flight)."""
         pd = pandas()
         rows = []
         for (label, seed), run in self.table.groupby(["estimator", "seed"], sort=False):
-            ok = (run[metric] > 0) & (run[x] > 0)
+            ok = (run[metric] > 0) & (run[x] > 0) & (run[x] >= start * run[x].max())
             if ok.sum() >= 2:
                 rows.append({"estimator": label, "seed": seed,
                              "slope": np.polyfit(np.log(run[x][ok]), np.log(run[metric][ok]), 1)[0]})

@@ -1,4 +1,7 @@
-"""Scenes with answers known in closed form or by independent quadrature."""
+"""Scenes with answers known in closed form or by independent quadrature: a mirror furnace, a glass sphere
+invisible in a white furnace, glossy plates under a constant sky, furnaces with paths of hundreds of
+bounces (albedo 0.99), and a furnace to a tenth of a percent.  (Furnaces of albedo 0.5 and 0.9 for every
+estimator configuration are in the agreement matrix, test_agreement.py.)"""
 from __future__ import annotations
 
 import numpy as np
@@ -6,13 +9,9 @@ import pytest
 
 import pathspace as ps
 from pathspace.bsdfs import Conductor, Phong
-from pathspace.validate import compare_estimates, furnace_radiance
+from pathspace.validate import compare_estimates, furnace_radiance, furnace_scene
 from pathspace.validate.bsdf import BSDFCheck, bsdf_albedo
-
-
-def mean_and_error(result, channel=0):
-    values = result.image[..., channel]
-    return values.mean(), np.sqrt(result.variance[..., channel].sum()) / values.size
+from conftest import mean_and_error, no_nonfinite, scene_dict
 
 
 def enclosure(material: dict, emission: float, inner_shapes=()) -> ps.Scene:
@@ -79,3 +78,39 @@ def test_glossy_plate_under_a_constant_sky(material):
         # Within the pixel footprint the albedo varies a little; allow 1% for it.
         tolerance = 4 * np.sqrt(variance + (2 * albedo_error) ** 2) + 0.01 * expected
         assert np.all(np.abs(value - expected) < tolerance), (px, py, value, expected, tolerance)
+
+
+
+def test_long_path_furnace_path_tracing():
+    """Albedo 0.99 (paths of ~100 bounces): L = 100 in every pixel and channel, to 1%."""
+    result = ps.render(furnace_scene(0.99), "pt", spp=64, seed=11)
+    exact = furnace_radiance(0.99, 1.0)
+    mean, error = mean_and_error(result)
+    assert error < 0.01 * exact  # the test has the power to see a 3% bias
+    assert abs(mean - exact) < 3 * error, (mean, exact, error)
+    assert result.stats["nonfinite"] == 0
+    # Every channel, not just the first.
+    np.testing.assert_allclose(result.image.mean(axis=(0, 1)), exact, rtol=6 * error / exact)
+
+
+@pytest.mark.slow
+def test_long_path_furnace_bdpt():
+    """Albedo 0.99: subpaths of more than 200 vertices, every connection finite, L = 100."""
+    data = scene_dict("furnace", (8, 8))
+    data["materials"]["wall"]["reflectance"] = [0.99] * 3
+    result = ps.render(ps.scene_from_dict(data), "bdpt", spp=64, seed=7)
+    mean, error = mean_and_error(result)
+    assert result.stats["longest_subpath"] > 200 and no_nonfinite(result)
+    assert error < 0.02 * 100.0 and abs(mean - 100.0) < 3 * error, (mean, error)
+
+
+@pytest.mark.slow
+def test_furnace_to_a_tenth_of_a_percent():
+    for albedo in (0.5, 0.9, 0.99):
+        result = ps.render(furnace_scene(albedo, resolution=(64, 64)), spp=256 if albedo < 0.99 else 128, seed=4)
+        values = result.image[..., 0]
+        error = np.sqrt(result.variance[..., 0].sum()) / values.size
+        exact = furnace_radiance(albedo, 1.0)
+        assert error < 1e-3 * exact * 1.5
+        assert abs(values.mean() - exact) < 3 * error
+

@@ -1,16 +1,22 @@
-"""Light sampling: selection pmfs, sample() against pdf_hit(), unbiased solid-angle estimates, delta lights."""
+"""The LightSet's verbs over entities, for light sampling from a receiver: selection pmfs, ``sample_li``
+against ``pdf_li`` (area and solid-angle measure, power and uniform selection), unbiased subtended
+solid angles (one-sided lamps seen from behind carry nothing), delta and environment samples, entity
+flags, and a chi-square test of sampled directions against the densities ``pdf_li`` gives."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
 import pathspace as ps
+from pathspace.lights import DirectionalLight, Environment, PointLight, SpotLight
+from pathspace.mis import LIGHT_DELTA, LIGHT_INFINITE
 from pathspace.spectra import RGBColours
 from pathspace.validate import chi2_test_directions
 from conftest import cornell_dict
 
 
 def two_light_scene(extra_lights=()):
+    """The Cornell box with its one-sided ceiling lamp and a small two-sided lamp near the back wall."""
     data = cornell_dict((8, 8))
     data["shapes"][0]["emitter"] = {"radiance": [1.0] * 3}
     data["shapes"].append({"name": "lamp2", "type": "quad", "corner": [-0.9, -0.5, -0.99], "edge_u": [0.3, 0, 0],
@@ -18,6 +24,13 @@ def two_light_scene(extra_lights=()):
                            "emitter": {"radiance": [8.0] * 3, "two_sided": True}})
     data["lights"] = list(extra_lights)
     return ps.scene_from_dict(data)
+
+
+EVERY_KIND = [{"type": "point", "position": [0, 0.5, 0], "intensity": [2, 2, 2]},
+              {"type": "spot", "position": [0, 0.9, 0], "look_at": [0, -1, 0], "intensity": [5, 5, 5],
+               "cone_angle": 30, "falloff_start": 20},
+              {"type": "directional", "direction": [0, -1, 0], "irradiance": [1, 2, 3]},
+              {"type": "environment", "radiance": [0.1, 0.2, 0.3]}]
 
 
 def spherical_triangle_omega(v, point):
@@ -31,18 +44,22 @@ def spherical_triangle_omega(v, point):
 
 @pytest.mark.parametrize("measure", ["area", "solid_angle"])
 @pytest.mark.parametrize("selection", ["power", "uniform"])
-def test_sample_pdf_agrees_with_pdf_hit(selection, measure):
+def test_sample_li_density_is_pdf_li(selection, measure):
+    """The density sample_li reports is the one pdf_li gives the point a ray finds, on the entity the
+    ray hits (for area lights the entity of a triangle is ``area.emitter_of_triangle[triangle]``)."""
     scene = two_light_scene()
     lights = scene.lights
     rng = np.random.default_rng(0)
     receivers = rng.uniform(-0.8, 0.8, (3, 20_000)).astype(np.float32)
-    s = lights.sample(receivers, rng.random((3, 20_000)), RGBColours, selection, measure)
+    s = lights.sample_li(receivers, rng.random((3, 20_000)), RGBColours, selection, measure)
     # Recover the sampled triangle by tracing the sampled direction.
     hits = scene.accel.intersect(receivers, s.wi)
-    reached = np.isclose(hits.t, s.distance, rtol=1e-4) & (lights.area.emitter_of_triangle[hits.prim] >= 0)
+    entity = np.where(hits.prim >= 0, lights.area.emitter_of_triangle[np.maximum(hits.prim, 0)], -1)
+    reached = np.isclose(hits.t, s.distance, rtol=1e-4) & (entity >= 0)
     assert reached.sum() > 2000  # unoccluded samples to compare (receivers may sit inside the boxes)
+    np.testing.assert_array_equal(s.entity[reached], entity[reached])  # the sample lies on the entity it names
     points = receivers[:, reached] + s.wi[:, reached] * s.distance[reached]
-    again = lights.pdf_hit(hits.prim[reached], receivers[:, reached], points, selection, measure)
+    again = lights.pdf_li(entity[reached], receivers[:, reached], points, selection, measure)
     np.testing.assert_allclose(again, s.pdf[reached], rtol=2e-3)
 
 
@@ -57,8 +74,8 @@ def test_light_sampling_integrates_the_subtended_solid_angle(measure):
     lights = scene.lights
     for point, lamp_visible in ((np.array([0.1, -0.3, 0.2]), True), (np.array([0.0, 0.995, 0.0]), False)):
         n = 400_000
-        s = lights.sample(np.repeat(point[:, None].astype(np.float32), n, axis=1),
-                          np.random.default_rng(1).random((3, n)), RGBColours, "power", measure)
+        s = lights.sample_li(np.repeat(point[:, None].astype(np.float32), n, axis=1),
+                             np.random.default_rng(1).random((3, n)), RGBColours, "power", measure)
         emitting = s.facing & (s.value[0] > 0)
         estimate = np.where(emitting, 1.0 / s.pdf, 0.0)
         mean, error = estimate.mean(), estimate.std() / np.sqrt(n)
@@ -75,55 +92,43 @@ def test_light_sampling_integrates_the_subtended_solid_angle(measure):
             assert on_lamp.sum() > 1000 and not np.any(emitting & on_lamp)
 
 
-def test_solid_angle_sampling_is_uniform_over_the_triangle_chi2():
-    from pathspace.lights.spherical_triangle import sample_spherical_triangle, solid_angle
-
-    v = np.array([[-0.3, 0.2, -1.0], [0.6, 0.1, -0.8], [0.1, 0.9, -1.2]])
-    ref = np.zeros((3, 1))
-    omega = float(solid_angle(v[0][:, None], v[1][:, None], v[2][:, None], ref)[0])
-
-    def sample(u):
-        count = u.shape[1]
-        rep = [np.repeat(x[:, None], count, axis=1) for x in v]
-        w, _ = sample_spherical_triangle(*rep, np.zeros((3, count)), u)
-        return w, np.all(np.isfinite(w), axis=0)
-
-    def pdf(w):
-        # Inside the spherical triangle iff the ray hits the planar triangle.
-        e1, e2 = v[1] - v[0], v[2] - v[0]
-        s1 = np.cross(w.T, e2)
-        det = s1 @ e1
-        b1 = (-(v[0]) @ s1.T) / det
-        b2 = np.einsum("ij,ij->i", w.T, np.cross(-v[0], e1)[None, :].repeat(w.shape[1], 0)) / det
-        t = (np.cross(-v[0], e1) @ e2) / det
-        tolerance = 1e-6  # directions along the edges, within float rounding of inside
-        inside = (b1 >= -tolerance) & (b2 >= -tolerance) & (b1 + b2 <= 1 + tolerance) & (t > 0)
-        return np.where(inside, 1.0 / omega, 0.0)
-
-    result = chi2_test_directions(sample, pdf, sample_count=300_000, res_z=64, res_phi=128, seed=3)
-    assert result.passed, str(result)
-
-
 def test_selection_pmfs():
-    scene = two_light_scene([{"type": "point", "position": [0, 0.5, 0], "intensity": [2, 2, 2]},
-                             {"type": "environment", "radiance": [0.1, 0.1, 0.1]}])
+    scene = two_light_scene(EVERY_KIND[:1] + EVERY_KIND[3:])
     lights = scene.lights
     power = lights.power
     np.testing.assert_allclose(lights.pmf("power"), power / power.sum())
     np.testing.assert_allclose(np.bincount(lights.light_id, weights=lights.pmf("uniform")), [0.25] * 4)
     np.testing.assert_allclose(power[-2], 4 * np.pi * 2.0)  # point: 4 pi I
+    with pytest.raises(ValueError, match="light selection: expected one of"):
+        lights.pmf("random")
+
+
+def test_entities_flags_and_models():
+    """Entities: the 4 emitting triangles first, then one per other light in the order point, spot,
+    directional, environment; their flags say which no ray can hit and which lie at infinity."""
+    scene = two_light_scene(EVERY_KIND)
+    lights = scene.lights
+    assert lights.count == 8 and lights.area.count == 4 and lights.has_delta
+    np.testing.assert_array_equal(lights.flags, [0, 0, 0, 0, LIGHT_DELTA, LIGHT_DELTA, LIGHT_DELTA | LIGHT_INFINITE,
+                                                 LIGHT_INFINITE])
+    np.testing.assert_array_equal(lights.light_id, [0, 0, 1, 1, 2, 3, 4, 5])
+    assert [model.kind for model in lights.models] == ["area", "point", "spot", "directional", "environment"]
+    assert lights.environment_entity == 7 and isinstance(lights.environment, Environment)
+    assert lights.environment.radiance == (0.1, 0.2, 0.3)
+    assert [type(light) for light in lights.lights[2:]] == [PointLight, SpotLight, DirectionalLight, Environment]
+    np.testing.assert_array_equal(lights.area.emitter_of_triangle[lights.area.triangles], np.arange(4))
+    assert np.count_nonzero(lights.area.emitter_of_triangle >= 0) == 4
+    without = two_light_scene().lights
+    assert without.environment is None and without.environment_entity == -1 and not without.has_delta
 
 
 def test_delta_and_environment_samples():
-    scene = two_light_scene([{"type": "point", "position": [0, 0.5, 0], "intensity": [2, 2, 2]},
-                             {"type": "spot", "position": [0, 0.9, 0], "look_at": [0, -1, 0], "intensity": [5, 5, 5],
-                              "cone_angle": 30, "falloff_start": 20},
-                             {"type": "directional", "direction": [0, -1, 0], "irradiance": [1, 2, 3]},
-                             {"type": "environment", "radiance": [0.1, 0.2, 0.3]}])
+    scene = two_light_scene(EVERY_KIND)
     lights = scene.lights
     receiver = np.array([[0.0], [-0.5], [0.0]], dtype=np.float32)
     n = 100_000
-    s = lights.sample(np.repeat(receiver, n, axis=1), np.random.default_rng(2).random((3, n)), RGBColours, "uniform")
+    s = lights.sample_li(np.repeat(receiver, n, axis=1), np.random.default_rng(2).random((3, n)), RGBColours,
+                         "uniform")
     point = np.isclose(s.distance, 1.0) & s.delta
     np.testing.assert_allclose(s.value[:, point], 2.0)                 # I / d^2, d = 1
     np.testing.assert_allclose(s.wi[:, point].T, [[0, 1, 0]] * point.sum(), atol=1e-6)
@@ -134,31 +139,46 @@ def test_delta_and_environment_samples():
     env = ~s.delta & np.isinf(s.distance)
     np.testing.assert_allclose(s.pdf[env], 1 / 6 / (4 * np.pi))          # uniform selection among 6 lights
     assert abs(point.mean() - 1 / 6) < 0.01 and abs(env.mean() - 1 / 6) < 0.01
-    # Spot falloff: zero beyond the cone, smoothstep inside.
-    spot_light = lights.spots[0]
+    np.testing.assert_array_equal(s.entity[point], 4)
+    np.testing.assert_array_equal(s.entity[spot], 5)
+    np.testing.assert_array_equal(s.entity[directional], 6)
+    np.testing.assert_array_equal(s.entity[env], lights.environment_entity)
+    # The environment through the entity verbs: radiance le, density pdf_li (pmf / 4 pi) in any direction.
+    entity = np.full(3, lights.environment_entity)
+    directions = np.eye(3)
+    np.testing.assert_allclose(lights.le(entity, directions, directions, RGBColours).T, [[0.1, 0.2, 0.3]] * 3)
+    np.testing.assert_allclose(lights.pdf_li(entity, np.zeros((3, 3)), directions, "uniform"), 1 / 6 / (4 * np.pi))
+    # Spot falloff (its SpotLight description and its tables): zero beyond the cone, smoothstep inside.
+    spot_light = next(light for light in lights.lights if isinstance(light, SpotLight))
+    assert (spot_light.cone_angle, spot_light.falloff_start) == (30, 20)
+    tables = lights.tables[lights.models.index(SpotLight)]
     dirs = np.array([[0, -1, 0], [np.sin(np.radians(25)), -np.cos(np.radians(25)), 0],
                      [np.sin(np.radians(31)), -np.cos(np.radians(31)), 0]]).T
-    falloff = spot_light.falloff(dirs)
+    falloff = tables.falloff(np.zeros(3, np.int64), dirs)
     assert falloff[0] == 1.0 and 0 < falloff[1] < 1 and falloff[2] == 0.0
+    x = (np.cos(np.radians(25)) - spot_light.cos_cone) / (spot_light.cos_falloff_start - spot_light.cos_cone)
+    assert falloff[1] == pytest.approx(x * x * (3 - 2 * x), rel=1e-12)
+    np.testing.assert_allclose(lights.le(np.full(3, 5), np.zeros((3, 3)), dirs, RGBColours),
+                               np.repeat(5.0 * falloff[None], 3, axis=0))
 
 
 @pytest.mark.parametrize("measure", ["area", "solid_angle"])
 @pytest.mark.parametrize("selection", ["power", "uniform"])
 def test_light_sampling_directions_chi2(selection, measure):
-    """Directions of light samples from a receiver, against the density pdf_hit gives the surface they reach."""
+    """Directions of light samples from a receiver, against the density pdf_li gives the surface they reach."""
     scene = two_light_scene([{"type": "environment", "radiance": [0.1, 0.1, 0.1]}])
     lights = scene.lights
     receiver = np.array([[0.2], [-0.3], [0.1]], dtype=np.float32)
 
     def sample(u):
-        s = lights.sample(np.repeat(receiver, u.shape[1], axis=1), u, RGBColours, selection, measure)
+        s = lights.sample_li(np.repeat(receiver, u.shape[1], axis=1), u, RGBColours, selection, measure)
         return s.wi, np.ones(u.shape[1], bool)
 
     def pdf(directions):
         """Sum over every emitting triangle on the line of each direction (and the environment)."""
         count = directions.shape[1]
         origins = np.repeat(receiver, count, axis=1)
-        total = np.full(count, lights.pdf_environment(selection))
+        total = lights.pdf_li(np.full(count, lights.environment_entity), origins, directions, selection, measure)
         emitters = scene.emitter_accel
         tmin = np.zeros(count, dtype=np.float32)
         lanes = np.arange(count)
@@ -168,7 +188,8 @@ def test_light_sampling_directions_chi2(selection, measure):
             found = h.prim >= 0
             lanes, prim, t = lanes[found], h.prim[found], h.t[found]
             points = origins[:, lanes] + d[:, lanes] * t
-            total[lanes] += lights.pdf_hit(lights.area.triangles[prim], origins[:, lanes], points, selection, measure)
+            # emitter_accel's primitives are the emitting triangles in order: their area-light entities.
+            total[lanes] += lights.pdf_li(prim, origins[:, lanes], points, selection, measure)
             tmin[lanes] = t * np.float32(1 + 1e-5)
         return total
 

@@ -1,0 +1,157 @@
+"""Light tracing and BDPT, beyond agreement (which is the matrix, test_agreement.py): every single
+strategy (s, t) estimates the same length-k contribution, infeasible strategies contribute nothing,
+sky light reaches a far thin lens, long paths stay finite, multi-tile passes, determinism across threads,
+the strategy pyramid adds up to the image, the plans, and the parameter checks."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pathspace as ps
+from conftest import agree, no_nonfinite, scene_dict
+
+
+def scene(name: str, resolution=(32, 32), **camera) -> ps.Scene:
+    data = scene_dict(name, resolution)
+    data["camera"].update(camera)
+    return ps.scene_from_dict(data, source=name)
+
+
+@pytest.mark.parametrize("length", [1, 2, 3])
+def test_every_single_strategy_estimates_the_same_length_k_contribution(length):
+    """For paths of exactly k segments, each strategy (s, t), s + t = k + 1, alone (weight 1) estimates
+    the same image -- on a thin-lens camera, so t = 0 (light subpaths hitting the lens) is among them."""
+    s = scene("cornell-box-thin-lens", (16, 16), aperture_radius=0.5)
+    reference = ps.render(s, "bdpt", spp=1024, seed=8, mis="single", strategy=(1, length), max_depth=length)
+    assert reference.image.mean() > 0
+    for first in range(length + 2):
+        st = (first, length + 1 - first)
+        if st == (1, length):
+            continue
+        spp = 4096 if st[1] == 0 else 1024
+        result = ps.render(s, "bdpt", spp=spp, seed=9, mis="single", strategy=st, max_depth=length)
+        ok, report = agree(reference, result, block=16)
+        assert ok, (st, report)
+
+
+def test_infeasible_strategies_contribute_nothing():
+    """(1, 1) cannot join a camera point to a light at infinity: with only an environment its image is
+    exactly zero while BDPT still agrees with path tracing.  (t = 0 with a pinhole and s = 0 with point
+    lights are never even formed; their zero weights are tested on the MIS kernel, tests/test_mis.py.)"""
+    env = ps.scene_from_dict({
+        "camera": {"position": [0, 0, 5], "look_at": [0, 0, 0], "fov": 30, "resolution": [8, 8]},
+        "materials": {"grey": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
+        "shapes": [{"type": "quad", "corner": [-1, -1, 0], "edge_u": [2, 0, 0], "edge_v": [0, 2, 0],
+                    "material": "grey"}],
+        "lights": [{"type": "environment", "radiance": [1, 1, 1]}]})
+    assert not ps.render(env, "bdpt", spp=16, seed=1, mis="single", strategy=(1, 1)).image.any()
+    assert ps.render(env, "bdpt", spp=16, seed=1, mis="single", strategy=(0, 2)).image.any()
+    both = ps.render(env, "bdpt", spp=64, seed=2)
+    reference = ps.render(env, "pt", spp=256, seed=3)
+    ok, report = agree(reference, both)
+    assert ok, report
+
+
+def test_sky_light_hits_a_thin_lens_far_outside_the_geometry():
+    """Sky rays start on a disk around the geometry *and* the lens: a lens 5 units from a 0.2-wide quad
+    still receives them.  Strategy (2, 0) alone (sky -> lens) reproduces the sky seen directly."""
+    s = ps.scene_from_dict({
+        "camera": {"type": "thinlens", "position": [0, 0, 5], "look_at": [0, 0, 0], "fov": 40, "resolution": [8, 8],
+                   "aperture_radius": 1.0, "focus_distance": 5.0},
+        "materials": {"grey": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
+        "shapes": [{"type": "quad", "corner": [-0.1, -0.1, 0], "edge_u": [0.2, 0, 0], "edge_v": [0, 0.2, 0],
+                    "material": "grey"}],
+        "lights": [{"type": "environment", "radiance": [1, 1, 1]}]})
+    lights, camera = s.lights, s.camera
+    assert np.linalg.norm(camera.position - lights.context.disk_center) + camera.lens_radius <= lights.context.disk_radius
+    hits = ps.render(s, "bdpt", spp=16384, seed=1, mis="single", strategy=(2, 0), max_depth=1)
+    reference = ps.render(s, "pt", spp=64, seed=2, max_depth=1)
+    sky = np.all(reference.variance < 1e-12, axis=-1) & (reference.image[..., 0] > 0.999)
+    assert sky.sum() > 40
+    mean, error = hits.image[sky].mean(), np.sqrt(hits.variance[sky][:, 0].sum()) / sky.sum()
+    assert abs(mean - 1.0) < 4 * error and error < 0.03, (mean, error)
+
+
+
+def long_path_furnace(resolution):
+    data = scene_dict("furnace", resolution)
+    data["materials"]["wall"]["reflectance"] = [0.99] * 3
+    return ps.scene_from_dict(data)
+
+
+def test_long_paths_stay_finite():
+    """Albedo 0.99: subpaths of more than 200 vertices occur; every weight and sample stays finite."""
+    result = ps.render(long_path_furnace((4, 4)), "bdpt", spp=8, seed=6)
+    assert result.stats["longest_subpath"] > 200
+    assert no_nonfinite(result) and np.all(np.isfinite(result.image)) and np.all(result.image > 0)
+
+
+def test_multi_tile_passes(monkeypatch):
+    """Images larger than one item (a pass split over tiles) assemble their splats pass by pass: the
+    same on one or two threads, and the same image as path tracing."""
+    from pathspace.estimators.bidirectional import Bidirectional
+
+    monkeypatch.setattr(Bidirectional, "tile_pixels", 1000)  # 64 x 64 pixels: 5 tiles per pass
+    s = scene("cornell-box", (64, 64))
+    one = ps.render(s, "lt", spp=2, seed=3, threads=1)
+    np.testing.assert_array_equal(one.image, ps.render(s, "lt", spp=2, seed=3, threads=2).image)
+    lt = ps.render(s, "lt", spp=32, seed=4)
+    ok, report = agree(ps.render(s, "pt", spp=64, seed=5), lt, block=16)
+    assert ok, report
+
+
+def test_determinism_across_threads():
+    s = scene("cornell-box-thin-lens", (24, 20))
+    one = ps.render(s, "bdpt", spp=4, seed=3, threads=1)
+    two = ps.render(s, "bdpt", spp=4, seed=3, threads=2)
+    np.testing.assert_array_equal(one.image, two.image)
+    assert not np.array_equal(one.image, ps.render(s, "bdpt", spp=4, seed=4, threads=1).image)
+
+
+def test_pyramid_sums_to_the_image():
+    """With max_depth = pyramid, the weighted strategy images add up to the image (per-strategy
+    agreement of the unweighted images is tested with mis="single" above)."""
+    s = scene("cornell-box", (16, 16))
+    result = ps.render(s, "bdpt", spp=64, seed=5, max_depth=3, pyramid=3)
+    assert set(result.strategies) == {(a, k + 1 - a) for k in (1, 2, 3) for a in range(k + 1)}  # no t = 0: pinhole
+    total = sum(images["weighted"] for images in result.strategies.values())
+    np.testing.assert_allclose(total, result.image, rtol=1e-9, atol=1e-12)
+    for images in result.strategies.values():  # each strategy's weighted part is a fraction of its whole
+        assert np.all(images["weighted"] <= images["unweighted"] + 1e-12) and images["unweighted"].max() > 0
+
+
+
+def test_plans():
+    """The plan says what runs: the heuristic, the roulette, the strategies a camera or light rules out."""
+    bdpt = ps.estimators.make_estimator("bdpt")
+    text = "\n".join(bdpt.plan(scene("cornell-box-thin-lens", (8, 8))))
+    assert "bidirectional path tracing, max_depth=unbounded; power heuristic (beta=2)" in text
+    assert "Russian roulette from depth 1: survival probability = material albedo" in text
+    assert "thin-lens camera: t = 0 strategy (light subpaths passing through the lens)" in text
+    text = "\n".join(bdpt.plan(scene("cornell-box-point-light", (8, 8))))
+    assert "pinhole camera: no t = 0 strategy (rays cannot hit it)" in text
+    assert "point/spot/directional lights: no s = 0 strategy for their paths (rays cannot hit them)" in text
+    text = "\n".join(ps.estimators.make_estimator("lt", rr="throughput").plan(scene("cornell-box-specular", (8, 8))))
+    assert "light tracing, max_depth=unbounded" in text
+    assert "Russian roulette from depth 1: survival probability = max throughput" in text
+    assert "specular materials (mirror, glass): paths reaching the camera only through them are not formed" in text
+
+
+def test_parameter_errors():
+    with pytest.raises(ValueError, match=r"strategy: mis='single' needs \(s, t\)"):
+        ps.estimators.make_estimator("bdpt", mis="single")
+    with pytest.raises(ValueError, match=r"mis: expected one of"):
+        ps.estimators.make_estimator("bdpt", mis="maximum")
+    for name in ("lt", "bdpt"):
+        with pytest.raises(ValueError, match=r"rr: expected one of \('off', 'fixed', 'albedo', 'throughput'\)"):
+            ps.estimators.make_estimator(name, rr="sometimes")
+        # One roulette vocabulary: the throughput policy is accepted (it used to be path tracing's alone).
+        assert ps.estimators.make_estimator(name, rr="throughput").roulette.policy == "throughput"
+    with pytest.raises(ValueError, match=r"max_depth"):
+        ps.estimators.make_estimator("bdpt", max_depth=0)
+    with pytest.raises(ValueError, match=r"longer than max_depth=2"):
+        ps.estimators.make_estimator("bdpt", mis="single", strategy=(2, 2), max_depth=2)
+    with pytest.raises(ValueError, match="light tracing needs at least one light"):
+        data = scene_dict("cornell-box", (4, 4))
+        data["shapes"][0].pop("emitter")
+        ps.render(ps.scene_from_dict(data), "lt", spp=1)
