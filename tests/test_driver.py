@@ -136,3 +136,21 @@ def test_render_arguments_are_checked(small):
                             ({"checkpoints": [0]}, "checkpoints: expected")):
         with pytest.raises(ValueError, match=message):
             ps.render(small, "pt", **kwargs)
+
+
+def test_timed_items_grow_while_short_and_shrink_when_long():
+    from pathspace.estimators.passes import TIMED_ITEM_SECONDS, _TimedItemSize
+
+    size = _TimedItemSize(10.0, first=4, largest=64)  # target: TIMED_ITEM_SECONDS x 10 s per item
+    target = TIMED_ITEM_SECONDS * 10.0
+    assert size() == 4
+    for expected in (8, 16, 32, 64, 64):
+        size.observe(0.1 * target, size())
+        assert size() == expected
+    size.observe(0.1 * target, 3)  # a short item smaller than the current size says nothing
+    assert size() == 64
+    size.observe(3.0 * target, 64)
+    assert size() == 32
+    size.observe(1.0 * target, 32)  # on target: unchanged
+    assert size() == 32
+    assert _TimedItemSize(1.0, first=500, largest=64)() == 64

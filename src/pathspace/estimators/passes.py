@@ -66,8 +66,9 @@ def _pass_groups(passes: Iterator[int], size: Callable[[], int], first: int, bre
 
 class _TimedItemSize:
     """Passes per item under a time budget, from the items' own durations: starting from ``first``
-    passes, the size doubles while a worker's last item took under half of TIMED_ITEM_SECONDS of the budget and halves
-    while it took over twice that (a pass's cost is known only once passes have run)."""
+    passes (at most ``largest``), the size doubles while a worker's last item took under half of
+    TIMED_ITEM_SECONDS of the budget and halves while it took over twice that (a pass's cost is known
+    only once passes have run)."""
 
     def __init__(self, seconds: float, first: int, largest: int) -> None:
         self.target, self.largest, self.size = TIMED_ITEM_SECONDS * seconds, largest, min(first, largest)
