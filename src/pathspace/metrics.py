@@ -73,13 +73,11 @@ def smape(test: np.ndarray, reference: np.ndarray, epsilon: float = RELMSE_EPSIL
 def flip(test: np.ndarray, reference: np.ndarray, exposure: float = 0.0, pixels_per_degree: float = 67.0) -> float:
     """Mean LDR-FLIP error between the display images (exposure in stops, clipped, sRGB-encoded) of
     ``test`` and ``reference``; 0 for identical images, up to 1.  Needs the ``experiments`` extra."""
+    from .extras import optional_import
     from .imageio import display
 
     test, reference = _pair(test, reference)
-    try:
-        import flip_evaluator
-    except ImportError:
-        raise ImportError("the FLIP metric needs NVIDIA's flip-evaluator: pip install 'pathspace[experiments]'") from None
+    flip_evaluator = optional_import("flip_evaluator", "the FLIP metric (NVIDIA's flip-evaluator)")
     _, mean, _ = flip_evaluator.evaluate(np.ascontiguousarray(display(reference, exposure), dtype=np.float32),
                                          np.ascontiguousarray(display(test, exposure), dtype=np.float32), "LDR",
                                          inputsRGB=True, applyMagma=False, parameters={"ppd": pixels_per_degree})

@@ -13,17 +13,14 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from .extras import optional_import
 from .imageio import display
 
 __all__ = ["show", "grid", "error_map", "crop", "inset", "pyramid", "convergence_plot"]
 
 
 def _pyplot():
-    try:
-        import matplotlib.pyplot as plt
-    except ImportError:
-        raise ImportError("figures need matplotlib: pip install 'pathspace[experiments]'") from None
-    return plt
+    return optional_import("matplotlib.pyplot", "figures")
 
 
 def show(image: Any, ax=None, exposure: float = 0.0, title: str | None = None):

@@ -110,12 +110,7 @@ class RussianRoulette:
         """
         if self.policy == "off" or depth.max(initial=0) < self.start_depth:
             return None
-        if self.policy == "fixed":
-            q = np.full(depth.shape, 1.0 - self.probability)
-        elif self.policy == "albedo":
-            q = np.clip(albedo, 0.0, 1.0)
-        else:
-            q = np.clip(throughput.max(axis=0), 0.0, self.cap)
+        q = self.mis_survival(albedo) if self.local else np.clip(throughput.max(axis=0), 0.0, self.cap)
         return np.where(depth >= self.start_depth, q, 1.0)
 
 

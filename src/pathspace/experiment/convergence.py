@@ -17,6 +17,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
+from ..extras import optional_import
 from ..metrics import METRICS, predicted_relmse
 from .specs import EstimatorSpec
 
@@ -27,11 +28,7 @@ DEFAULT_METRICS = ("relmse", "mse", "mape", "smape")
 
 def pandas():
     """The pandas module, or an ImportError saying how to install it."""
-    try:
-        import pandas as pd
-    except ImportError:
-        raise ImportError("experiment tables need pandas: pip install 'pathspace[experiments]'") from None
-    return pd
+    return optional_import("pandas", "experiment tables")
 
 
 def reference_image(reference: Any) -> tuple[np.ndarray, np.ndarray | None]:
