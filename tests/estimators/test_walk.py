@@ -96,3 +96,16 @@ def test_recorded_densities_are_the_sampled_ones(params, local):
         np.testing.assert_allclose(sub.fwd[nxt], fwd, rtol=2e-4)
         np.testing.assert_allclose(sub.rev[prev], rev, rtol=2e-4)
         np.testing.assert_array_equal(sub.q[nxt - 1], roulette(nxt - 1))
+
+
+def test_stale_fields_keep_their_dtype_through_split_and_extend():
+    """Regression (CI failure): a wavefront emptied with a stale field, split and extended again, used to
+    turn that field into an object array that Embree refused."""
+    from pathspace.estimators.wavefront import Lanes
+
+    lanes = Lanes(("depth", "tmin"), depth=np.arange(4, dtype=np.int32), tmin=np.zeros(4, np.float32))
+    lanes.keep(np.array([], dtype=np.int64), stale=("tmin",))
+    deep = lanes.split(np.array([], dtype=np.int64))
+    deep.extend(Lanes(("depth", "tmin"), depth=np.ones(3, np.int32), tmin=np.full(3, 0.5, np.float32)))
+    assert deep.tmin.dtype == np.float32 and deep.depth.dtype == np.int32
+    np.testing.assert_array_equal(deep.tmin, [0.5, 0.5, 0.5])

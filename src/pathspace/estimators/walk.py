@@ -130,8 +130,8 @@ class Walk:
 
     def keep(self, indices: np.ndarray, *arrays: np.ndarray, stale: tuple[str, ...] = ()):
         """Keep only lanes ``indices`` (increasing): their state, their sampler, and the per-lane ``arrays``
-        (last axis), which are returned compacted.  Fields named in ``stale`` are dropped (the caller
-        replaces them)."""
+        (last axis), which are returned compacted.  Fields named in ``stale`` are left uninitialised (the
+        caller replaces them)."""
         self.lanes.keep(indices, stale)
         self.sampler.keep(indices)
         return tuple(np.take(a, indices, axis=-1) for a in arrays)

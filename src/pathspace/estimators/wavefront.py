@@ -73,9 +73,12 @@ class Lanes:
         return int(getattr(self, self.fields[0]).shape[-1])
 
     def keep(self, indices: np.ndarray, stale: tuple[str, ...] = ()) -> None:
-        """Keep only the lanes ``indices``; fields named in ``stale`` are dropped (the caller replaces them)."""
+        """Keep only the lanes ``indices``; fields named in ``stale`` are left uninitialised (same dtype and
+        shape, the caller replaces them)."""
         for name in self.fields:
-            setattr(self, name, None if name in stale else np.take(getattr(self, name), indices, axis=-1))
+            old = getattr(self, name)
+            setattr(self, name, np.empty(old.shape[:-1] + (len(indices),), old.dtype) if name in stale
+                    else np.take(old, indices, axis=-1))
 
     def split(self, indices: np.ndarray) -> "Lanes":
         """Remove the lanes ``indices`` (increasing) and return them as lanes of their own."""
@@ -93,7 +96,4 @@ class Lanes:
     def extend(self, other: "Lanes") -> None:
         """Append the lanes of ``other``."""
         for name in self.fields:
-            mine = getattr(self, name)
-            # A stale field (None) can only remain on an emptied wavefront.
-            setattr(self, name, getattr(other, name) if mine is None else np.concatenate([mine, getattr(other, name)],
-                                                                                          axis=-1))
+            setattr(self, name, np.concatenate([getattr(self, name), getattr(other, name)], axis=-1))
