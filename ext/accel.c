@@ -10,9 +10,10 @@
  * the GIL released.  Work is handed out in
  * chunks through an atomic counter, so threads that draw cheap rays take more.
  *
- * Invalid rays (NaN or infinite origin or direction, zero direction, NaN or
- * negative tmin, NaN tmax) are never traced: the call raises ValueError naming
- * the first such ray.
+ * Invalid rays (NaN or infinite origin or direction, zero direction, NaN,
+ * infinite or negative tmin, NaN tmax) are never traced: the call raises
+ * ValueError naming the first such ray.  A ray whose tmax is below its tmin
+ * (tmax = -inf, say) is valid and empty: it misses and is not occluded.
  */
 #include "native.h"
 
@@ -71,9 +72,17 @@ typedef struct {
     double scalar;
 } ScalarView;
 
+/* memcpy: the arrays may be unaligned (views into byte buffers); compilers turn it into a plain load. */
 static inline double read_value(const char *p, int is_double)
 {
-    return is_double ? *(const double *)p : (double)*(const float *)p;
+    if (is_double) {
+        double d;
+        memcpy(&d, p, sizeof(d));
+        return d;
+    }
+    float f;
+    memcpy(&f, p, sizeof(f));
+    return (double)f;
 }
 
 static inline double vec3_get(const Vec3View *v, npy_intp ray, int comp)
@@ -210,6 +219,10 @@ static void occlude_range(Query *q, npy_intp begin, npy_intp end)
     for (npy_intp i = begin; i < end; ++i) {
         if (!read_ray(q, i, r)) {
             note_bad_ray(q, i);
+            q->occluded[i] = 0;
+            continue;
+        }
+        if (!(r[7] >= r[3])) { /* an empty interval (tmax < tmin): nothing can lie on it */
             q->occluded[i] = 0;
             continue;
         }
@@ -492,8 +505,9 @@ static PyArrayObject *require_table(PyObject *obj, const char *name, int type, c
         PyErr_Format(PyExc_ValueError, "%s must have shape (M, 3), got ndim=%d", name, PyArray_NDIM(a));
         return NULL;
     }
-    if (!PyArray_IS_C_CONTIGUOUS(a)) {
-        PyErr_Format(PyExc_ValueError, "%s must be C-contiguous (use numpy.ascontiguousarray)", name);
+    if (!PyArray_IS_C_CONTIGUOUS(a) || !PyArray_ISALIGNED(a)) {
+        PyErr_Format(PyExc_ValueError, "%s must be C-contiguous and aligned (use numpy.require(%s, requirements='CA'))",
+                     name, name);
         return NULL;
     }
     return a;

@@ -255,10 +255,19 @@ PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs)
         PyErr_SetString(PyExc_ValueError, "mis_weights: subpath arrays disagree with their offsets");
         goto done;
     }
+    /* Every lane's vertices must lie within the arrays: offsets start at 0 and never decrease. */
+    for (npy_intp j = 0; j <= lanes; ++j) {
+        int broken = j == 0 ? loff[0] != 0 || eoff[0] != 0 : loff[j] < loff[j - 1] || eoff[j] < eoff[j - 1];
+        if (broken) {
+            PyErr_Format(PyExc_ValueError, "mis_weights: light_offset and eye_offset must start at 0 and never "
+                         "decrease (entry %zd breaks this)", (Py_ssize_t)j);
+            goto done;
+        }
+    }
     const int32_t *s = (const int32_t *)PyArray_DATA(a[0]), *t = (const int32_t *)PyArray_DATA(a[1]);
     const int64_t *lane = (const int64_t *)PyArray_DATA(a[2]);
     for (npy_intp m = 0; m < m_count; ++m) {
-        if (lane[m] < 0 || lane[m] >= lanes || s[m] < 0 || t[m] < 0 || s[m] + t[m] < 2 ||
+        if (lane[m] < 0 || lane[m] >= lanes || s[m] < 0 || t[m] < 0 || (int64_t)s[m] + t[m] < 2 ||
             s[m] - 1 > loff[lane[m] + 1] - loff[lane[m]] || t[m] - 1 > eoff[lane[m] + 1] - eoff[lane[m]]) {
             PyErr_Format(PyExc_ValueError, "mis_weights: connection %zd (lane %lld, s=%d, t=%d) does not fit its "
                          "subpaths", (Py_ssize_t)m, (long long)lane[m], s[m], t[m]);

@@ -44,6 +44,38 @@ def scaled(data: dict, factor: float) -> dict:
     return data
 
 
+def moved(data: dict, rotation: np.ndarray, translation) -> dict:
+    """The same scene with every position x mapped to R x + t (``rotation`` R, ``translation`` t): its shapes
+    become inline triangles in world coordinates; the camera and point-like lights move with them."""
+    scene = ps.scene_from_dict(data)
+    world = scene.to_world(scene.mesh.vertices)
+    out = copy.deepcopy(data)
+    out["shapes"] = []
+    for i, shape in enumerate(data["shapes"]):
+        used, local = np.unique(scene.mesh.indices[scene.mesh.shape == i], return_inverse=True)
+        entry = {key: value for key, value in shape.items() if key in ("name", "material", "emitter")}
+        entry.update(type="triangles", vertices=(world[used] @ rotation.T + translation).tolist(),
+                     triangles=local.reshape(-1, 3).tolist())
+        out["shapes"].append(entry)
+    for table, keys in [(out["camera"], ("position", "look_at"))] + [(light, ("position", "look_at"))
+                                                                      for light in out.get("lights", [])]:
+        for key in keys:
+            if key in table:
+                table[key] = (rotation @ np.asarray(table[key], dtype=float) + translation).tolist()
+    for table, key in [(out["camera"], "up")] + [(light, "direction") for light in out.get("lights", [])]:
+        if key in table or key == "up":
+            table[key] = (rotation @ np.asarray(table.get(key, [0.0, 1.0, 0.0]), dtype=float)).tolist()
+    return out
+
+
+def rotation_about(axis, degrees: float) -> np.ndarray:
+    """The 3x3 rotation by ``degrees`` about ``axis`` (Rodrigues' formula)."""
+    axis = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
+    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
+    angle = np.radians(degrees)
+    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * k @ k
+
+
 def agree(a, b, block=8, alpha=1e-3, mask=None) -> tuple[bool, str]:
     """Whether renders ``a`` and ``b`` estimate the same image (block-wise z-test), and the report;
     pixels outside ``mask`` are left out (set equal in both)."""

@@ -53,7 +53,7 @@ def test_matches_embreex_on_random_mesh():
 
 def test_matches_embreex_on_cornell_box(cornell):
     rng = np.random.default_rng(2)
-    vertices = cornell.mesh.vertices.astype(np.float32)
+    vertices = cornell.to_world(cornell.mesh.vertices).astype(np.float32)  # the box in [-1, 1]^3
     origins = rng.uniform(-0.99, 0.99, (100_000, 3)).astype(np.float32)
     # Half the rays from inside the box, half from outside (the camera side, some miss).
     origins[::2] += np.array([0.0, 0.0, 2.5], dtype=np.float32)

@@ -2,14 +2,19 @@
 from __future__ import annotations
 
 import json
+import os
+import signal
 import subprocess
 import sys
+import time
 
 import numpy as np
 import pytest
 
 import pathspace as ps
 from pathspace import metrics
+from pathspace.cli import main
+from pathspace.estimators import ESTIMATORS
 from pathspace.imageio import read_exr
 from conftest import ROOT
 
@@ -86,3 +91,103 @@ def test_info_prints_the_plan():
     assert done.returncode == 0
     assert "36 triangles" in done.stdout and "plan: next-event estimation + BSDF sampling" in done.stdout
 
+
+
+def run_main(capsys, *args) -> subprocess.CompletedProcess:
+    """``pathspace ARGS`` in this process (no interpreter start-up): exit code, stdout and stderr."""
+    try:
+        code = main([str(a) for a in args])
+    except SystemExit as exit:  # argparse: --help, --version, usage errors
+        code = exit.code
+    out, err = capsys.readouterr()
+    return subprocess.CompletedProcess(args, code, out, err)
+
+
+def test_version(capsys):
+    done = run_main(capsys, "--version")
+    assert done.returncode == 0 and done.stdout.strip() == f"pathspace {ps.__version__}"
+
+
+def test_render_help_lists_every_estimator_parameter(capsys):
+    """Every -p key of every estimator, with its default and meaning, and the long-render options."""
+    text = run_main(capsys, "render", "--help").stdout
+    lines = text.splitlines()
+    for name, cls in ESTIMATORS.items():
+        section = lines.index(f"  {name}:")
+        for key, default, meaning in cls.parameters():
+            assert f"    {key} (default {default!r}): {meaning}" in lines[section:], (name, key)
+    assert "--save-every SECONDS" in text and "--resume" in text
+
+
+def one_line_error(done, command: str, *fragments: str) -> None:
+    assert done.returncode == 2, (done.stdout, done.stderr)
+    assert "Traceback" not in done.stderr and len(done.stderr.strip().splitlines()) == 1, done.stderr
+    assert done.stderr.startswith(f"pathspace {command}: error: "), done.stderr
+    for fragment in fragments:
+        assert fragment in done.stderr, (fragment, done.stderr)
+
+
+def test_unwritable_outputs_fail_before_any_work(tmp_path, capsys):
+    """Every command that writes files checks its outputs first: one line, exit 2, at once (the renders
+    asked for would take hours)."""
+    blocker = tmp_path / "blocker"
+    blocker.write_text("a file where a folder should be")
+    bad = blocker / "out"
+    scene = ROOT / "scenes" / "cornell-box" / "scene.toml"
+    commands = {"render": ("render", scene, "--spp", 100000, "-o", f"{bad}.exr"),
+                "reference": ("reference", scene, "--spp", 100000, "--cache", bad),
+                "converge": ("converge", scene, "-e", "pt,bdpt", "--spp", 100000, "--reference", tmp_path / "r.exr",
+                             "-o", f"{bad}.csv"),
+                "export": ("export", "--mitsuba", scene, f"{bad}.xml")}
+    for command, args in commands.items():
+        start = time.perf_counter()
+        done = run_main(capsys, *args)
+        assert time.perf_counter() - start < 2.0, command
+        one_line_error(done, command, "cannot write", "(a file is in the way)")
+    one_line_error(run_main(capsys, "reference", scene, "--spp", 100000, "--cache", tmp_path, "-o", f"{bad}.exr"),
+                   "reference", f"cannot write {bad}.exr")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["blocker"]  # nothing rendered, nothing cached
+    (tmp_path / "folder.exr").mkdir()
+    one_line_error(run_main(capsys, "render", scene, "-o", tmp_path / "folder.exr"), "render", "it is a folder")
+
+
+def test_unknown_parameters_list_the_valid_keys(tmp_path, capsys):
+    scene = ROOT / "scenes" / "cornell-box" / "scene.toml"
+    keys = ", ".join(key for key, _, _ in ESTIMATORS["bdpt"].parameters())
+    for command, args in (("render", ("render", scene, "-e", "bdpt", "--spp", 100000, "-o", tmp_path / "x.exr")),
+                          ("info", ("info", scene, "-e", "bdpt")),
+                          ("reference", ("reference", scene, "-e", "bdpt", "--spp", 100000, "--cache", tmp_path))):
+        one_line_error(run_main(capsys, *args, "-p", "bogus=1"), command, "estimator 'bdpt' has no parameter(s) bogus; "
+                                                                  f"its parameters are: {keys}")
+    one_line_error(run_main(capsys, "converge", scene, "-e", "bdpt:bogus=1", "--spp", 100000, "--reference",
+                           tmp_path / "r.exr", "-o", tmp_path / "t.csv"), "converge", "has no parameter(s) bogus")
+    one_line_error(run_main(capsys, "render", scene, "-p", "max_depth=-7", "-o", tmp_path / "x.exr"), "render",
+                   "max_depth: expected -1 (unbounded) or an integer >= 1, got -7")
+    done = run_main(capsys, "render", scene, "--save-every", "-1", "-o", tmp_path / "x.exr")
+    assert done.returncode == 2 and "expected a number of seconds >= 0, got '-1'" in done.stderr
+
+
+def test_state_files_on_the_command_line(tmp_path, capsys):
+    """--resume without a state starts afresh and says so; a state is never overwritten without --resume,
+    nor resumed by a different render."""
+    scene = tmp_path / "scene.toml"
+    text = (ROOT / "scenes" / "cornell-box" / "scene.toml").read_text()
+    scene.write_text(text.replace("resolution = [256, 256]", "resolution = [16, 16]"))
+    out = tmp_path / "out.exr"
+    done = run_main(capsys, "render", scene, "--spp", 2, "-o", out, "-q", "--no-png", "--resume")
+    assert done.returncode == 0, done.stderr
+    assert f"no saved state at {out}.state: starting from the beginning" in done.stdout
+    assert read_exr(out)[2]["spp"] == 2 and not (tmp_path / "out.exr.state").exists()
+
+    state = tmp_path / "out.exr.state"
+    stopped = ps.render(ps.load_scene(scene), "pt", spp=300, seed=0, max_depth=3, state_file=state,
+                        stop_on_signal=True, checkpoints=[2],
+                        on_checkpoint=lambda c: os.kill(os.getpid(), signal.SIGINT))
+    assert stopped.stats["stopped"] == "SIGINT"
+    done = run_main(capsys, "render", scene, "--spp", 300, "-p", "max_depth=3", "-o", out)
+    one_line_error(done, "render", f"{state} holds an unfinished render ({stopped.stats['spp']} of 300 spp",
+                   "--resume")
+    done = run_main(capsys, "render", scene, "--spp", 300, "-p", "max_depth=4", "--seed", 1, "-o", out, "--resume")
+    one_line_error(done, "render", "was saved by a different render (params.max_depth: 3 in the state, 4 now; "
+                                   "seed: 0 in the state, 1 now)")
+    assert read_exr(out)[2]["spp"] == 2  # the earlier image is untouched

@@ -1,6 +1,8 @@
 """EXR files round-trip images, variances and metadata; PNGs are sRGB-encoded with exposure."""
 from __future__ import annotations
 
+import os
+
 import numpy as np
 import pytest
 
@@ -41,3 +43,52 @@ def test_png_encoding(tmp_path):
 
     np.testing.assert_array_equal(np.asarray(Image.open(tmp_path / "x.png")), to_srgb8(image))
 
+
+
+def test_a_failed_write_leaves_the_old_file_whole(tmp_path, monkeypatch):
+    """A write that dies halfway (a full disk) leaves the previous EXR and PNG intact and no temporary
+    file; a write that succeeds is flushed to disk (the file and its folder) before and after the rename."""
+    import OpenEXR
+    from PIL import Image
+
+    image = np.full((4, 6, 3), 0.5)
+    write_exr(tmp_path / "a.exr", image)
+    write_png(tmp_path / "a.png", image)
+    good = {name: (tmp_path / name).read_bytes() for name in ("a.exr", "a.png")}
+
+    class HalfWrittenExr:
+        def __init__(self, header, channels):
+            pass
+
+        def __enter__(self):
+            return self
+
+        def __exit__(self, *exc):
+            return False
+
+        def write(self, path):
+            with open(path, "wb") as file:
+                file.write(good["a.exr"][:100])
+            raise OSError(28, "No space left on device")
+
+    def half_written_png(self, path, format=None, **options):
+        with open(path, "wb") as file:
+            file.write(good["a.png"][:20])
+        raise OSError(28, "No space left on device")
+
+    with monkeypatch.context() as patch:
+        patch.setattr(OpenEXR, "File", HalfWrittenExr)
+        patch.setattr(Image.Image, "save", half_written_png)
+        with pytest.raises(OSError, match="No space left"):
+            write_exr(tmp_path / "a.exr", image * 2)
+        with pytest.raises(OSError, match="No space left"):
+            write_png(tmp_path / "a.png", image * 2)
+    assert {name: (tmp_path / name).read_bytes() for name in good} == good
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.exr", "a.png"]
+    np.testing.assert_array_equal(read_exr(tmp_path / "a.exr")[0], 0.5)
+
+    synced = []
+    monkeypatch.setattr(os, "fsync", lambda descriptor: synced.append(descriptor))
+    write_exr(tmp_path / "a.exr", image * 2)
+    assert len(synced) == 2  # the temporary file, then the folder after the rename
+    np.testing.assert_array_equal(read_exr(tmp_path / "a.exr")[0], 1.0)

@@ -12,7 +12,7 @@ NOTEBOOKS = sorted((ROOT / "notebooks").glob("*.ipynb"))
 
 def test_there_are_notebooks():
     assert {p.stem for p in NOTEBOOKS} >= {"russian-roulette", "mis-weights", "importance-sampling", "error-vs-time",
-                                          "spectral"}
+                                          "spectral", "stability"}
 
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])

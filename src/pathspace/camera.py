@@ -21,26 +21,26 @@ cannot be hit by rays, and "lens_area" is taken as 1.
 """
 from __future__ import annotations
 
+import copy
 import numpy as np
 
-from typing import TYPE_CHECKING
-
 from .checks import triple
+from .fields import MAX_COORDINATE, Fields
 from .vecmath import dot
-
-if TYPE_CHECKING:
-    from .fields import Fields
 
 __all__ = ["CAMERAS", "PinholeCamera", "ThinLensCamera", "FOV_AXES"]
 
 FOV_AXES = ("x", "y", "smaller", "larger")
+# Fields of view (degrees) below this are refused: nothing real is narrower, and near 1e-150 the image
+# rectangle's area (~ fov^2) underflows float64 and the camera's importance turns infinite.
+MIN_FOV = 1e-6
 
 
 def _view(fields: "Fields") -> dict:
     """The parameters every camera reads: position, look_at, up, fov, fov_axis, resolution."""
-    view = dict(position=fields.vector("position", 3), look_at=fields.vector("look_at", 3),
-                up=fields.vector("up", 3, [0.0, 1.0, 0.0]),
-                fov=fields.number("fov", low=0.0, high=180.0, low_open=True, high_open=True),
+    view = dict(position=fields.point("position"), look_at=fields.point("look_at"),
+                up=fields.direction("up", [0.0, 1.0, 0.0]),
+                fov=fields.number("fov", low=MIN_FOV, high=180.0, high_open=True),
                 fov_axis=fields.string("fov_axis", "smaller", choices=FOV_AXES))
     width, height = fields.vector("resolution", 2, integer=True, low=1)
     return dict(view, width=int(width), height=int(height))
@@ -68,7 +68,7 @@ class PinholeCamera:
 
         forward = self.look_at - self.position
         length = np.linalg.norm(forward)
-        if not length > 1e-12 * max(1.0, np.abs(self.position).max()):
+        if not length > 1e-12 * max(np.abs(self.position).max(), np.abs(self.look_at).max()):
             raise ValueError("look_at: must differ from position (the viewing direction is undefined)")
         self.forward = forward / length
         right = np.cross(self.forward, self.up)
@@ -95,6 +95,13 @@ class PinholeCamera:
         view = _view(fields)
         fields.finish()
         return fields.build(lambda: cls(**view))
+
+    def translated(self, offset: np.ndarray) -> "PinholeCamera":
+        """The same camera moved by ``offset`` (3,) (into the scene's render space)."""
+        moved = copy.copy(self)
+        moved.position = self.position + offset
+        moved.look_at = self.look_at + offset
+        return moved
 
     def __repr__(self) -> str:
         return (f"{type(self).__name__}(position={self.position.tolist()}, look_at={self.look_at.tolist()}, "
@@ -239,9 +246,9 @@ class ThinLensCamera(PinholeCamera):
         """A ``[camera]`` table of type "thinlens": the pinhole's fields, ``aperture_radius`` and optionally
         ``focus_distance`` (default: the distance to ``look_at``)."""
         view = _view(fields)
-        lens = {"aperture_radius": fields.number("aperture_radius", low=0.0, low_open=True)}
+        lens = {"aperture_radius": fields.number("aperture_radius", low=0.0, low_open=True, high=MAX_COORDINATE)}
         if fields.has("focus_distance"):
-            lens["focus_distance"] = fields.number("focus_distance", low=0.0, low_open=True)
+            lens["focus_distance"] = fields.number("focus_distance", low=0.0, low_open=True, high=MAX_COORDINATE)
         fields.finish()
         return fields.build(lambda: cls(**view, **lens))
 

@@ -1,30 +1,43 @@
-"""Command line: ``pathspace render | compare | info | reference | converge``.
+"""Command line: ``pathspace render | compare | info | reference | converge | export``.
 
     pathspace render scenes/cornell-box/scene.toml --spp 64 -o cornell.exr
     pathspace render SCENE --time 30 -p max_depth=8 -p rr=off --set camera.fov=30 -o out.exr
+    pathspace render SCENE --spp 4096 -o out.exr --save-every 60    # Ctrl-C, then the same with --resume
     pathspace compare test.exr reference.exr [--json]
     pathspace info SCENE [--estimator pt]
     pathspace reference SCENE [-e pt] [--spp 4096] [-o ref.exr]
     pathspace converge SCENE -e pt,lt,bdpt --time 60 --reference REF.exr [--seeds 3] [-o table.csv]
+    pathspace export --mitsuba SCENE OUT.xml        # Mitsuba 3 scene XML, meshes in OUT-meshes/
 
 ``-p KEY=VALUE`` sets an estimator parameter (``render --help`` lists them
 all), ``--set KEY=VALUE`` changes the scene (``materials.white.reflectance=[0.5,0.5,0.5]``,
 ``camera.resolution=[128,128]``; see :mod:`pathspace.scene.overrides`).
 Values are TOML values: numbers, true/false, "strings", [lists].
+
+Output paths are checked before anything is rendered.  ``render`` saves its
+state to ``OUT.exr.state`` every ``--save-every`` seconds and when stopped by
+Ctrl-C (SIGINT) or SIGTERM -- then it writes the image of the completed
+passes, says how to resume, and exits with 130 or 143 -- and ``--resume``
+continues from it (see :mod:`pathspace.resume`).  Errors are one line on
+stderr and exit code 2.
 """
 from __future__ import annotations
 
 import argparse
 import json
+import math
+import shlex
+import signal
 import sys
+import warnings
 from pathlib import Path
 
 from . import __version__, metrics
 from .contact_sheet import strategy_layers, write_contact_sheet
-from .driver import render
-from .estimators import ESTIMATORS, make_estimator
+from .driver import RenderResult, render
+from .estimators import ESTIMATORS, Estimator, make_estimator
 from .experiment.specs import EstimatorSpec, parse_assignment
-from .imageio import read_exr, write_exr, write_png
+from .imageio import atomic_output, read_exr, write_exr, write_png
 from .scene import SceneError, load_scene
 
 __all__ = ["main"]
@@ -44,14 +57,29 @@ def _param(text: str) -> tuple[str, object]:
     return key.replace("-", "_"), value
 
 
+def _seconds(text: str) -> float:
+    """A number of seconds >= 0 (for --save-every)."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (math.isfinite(value) and value >= 0.0):
+        raise argparse.ArgumentTypeError(f"expected a number of seconds >= 0, got {text!r}")
+    return value
+
+
 def _writable(path: Path) -> Path:
     """``path``, after making sure a file can be written there (before an hour of rendering, not after)."""
     folder = path.parent if str(path.parent) else Path(".")
+    if path.is_dir():
+        raise ValueError(f"cannot write {path}: it is a folder")
     try:
         folder.mkdir(parents=True, exist_ok=True)
         probe = folder / f".{path.name}.probe"
         probe.write_bytes(b"")
         probe.unlink()
+    except (FileExistsError, NotADirectoryError):
+        raise ValueError(f"cannot write {path}: its folder {folder} cannot be created (a file is in the way)") from None
     except OSError as error:
         raise ValueError(f"cannot write {path}: {error.strerror or error}") from None
     return path
@@ -66,7 +94,7 @@ def _parameter_help() -> str:
 
 
 def _scene_arguments(command: argparse.ArgumentParser) -> None:
-    command.add_argument("scene", help="scene file (.toml)")
+    command.add_argument("scene", help="scene file (.toml, or Mitsuba scene .xml)")
     command.add_argument("--set", dest="overrides", action="append", type=_assignment, default=[],
                          metavar="KEY=VALUE", help="change the scene, repeatable (e.g. --set camera.fov=30)")
 
@@ -98,6 +126,12 @@ def _build_parser() -> argparse.ArgumentParser:
     r.add_argument("--exposure", type=float, default=0.0, help="PNG exposure in stops (default 0)")
     r.add_argument("--no-png", action="store_true", help="do not write the PNG")
     r.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    r.add_argument("--save-every", type=_seconds, default=60.0, metavar="SECONDS",
+                   help="save the render's state to OUT.exr.state this often (default 60; 0: only when stopped by "
+                        "Ctrl-C or SIGTERM); the file is removed once the image is written")
+    r.add_argument("--resume", action="store_true",
+                   help="continue the render saved in OUT.exr.state (same scene, estimator, parameters, seed, budget "
+                        "and colour mode); without a state file, start from the beginning")
 
     c = commands.add_parser("compare", help="error metrics of a test image against a reference")
     c.add_argument("test", help="test EXR")
@@ -133,6 +167,12 @@ def _build_parser() -> argparse.ArgumentParser:
     v.add_argument("--metric", default="relmse", choices=sorted(metrics.METRICS), help="metric to plot and fit")
     v.add_argument("-o", "--output", default="convergence.csv", help="CSV table (the plot goes beside it, .png)")
     v.add_argument("--threads", type=int, default=None)
+
+    x = commands.add_parser("export", help="write a scene for another renderer (Mitsuba 3: scene XML, PLY meshes)")
+    target = x.add_mutually_exclusive_group(required=True)
+    target.add_argument("--mitsuba", action="store_true", help="Mitsuba 3 scene XML; meshes go to OUT-meshes/ beside it")
+    _scene_arguments(x)
+    x.add_argument("output", help="output file (OUT.xml)")
     return parser
 
 
@@ -140,15 +180,14 @@ def _load(args):
     return load_scene(args.scene, **dict(args.overrides))
 
 
-def _render(args) -> int:
-    out = Path(args.output)
-    if out.suffix.lower() != ".exr":
-        out = out.with_suffix(".exr")
-    _writable(out)
-    scene = _load(args)
-    result = render(scene, args.estimator, spp=args.spp, time=args.time, seed=args.seed, threads=args.threads,
-                    progress=not args.quiet, spectral=args.spectral, wavelength_sampling=args.wavelengths,
-                    **dict(args.param))
+def _estimator(args) -> Estimator:
+    """The estimator of ``-e`` and ``-p``: unknown keys and bad values fail before the scene is loaded."""
+    return make_estimator(args.estimator, **dict(args.param))
+
+
+def _write_render(out: Path, result: RenderResult, args) -> list[str]:
+    """Write the EXR, and unless --no-png the PNG and (bidirectional pyramids) the contact sheets; the
+    paths written."""
     metadata = {k: v for k, v in result.stats.items() if k != "plan"}
     layers = strategy_layers(result.strategies) if result.strategies else None
     write_exr(out, result.image, result.variance, metadata, xyz=result.xyz if args.xyz else None, layers=layers)
@@ -161,12 +200,41 @@ def _render(args) -> int:
             sheet = out.with_name(f"{out.stem}.strategies-{kind}.png")
             write_contact_sheet(sheet, result.strategies, kind, exposure=args.exposure)
             written.append(str(sheet))
-    print(f"colour: {result.stats['mode']} ({result.stats['mode_reason']})")
-    for line in result.stats["plan"]:
+    return written
+
+
+def _render(args) -> int:
+    out = Path(args.output)
+    if out.suffix.lower() != ".exr":
+        out = out.with_suffix(".exr")
+    _writable(out)
+    state = out.with_name(out.name + ".state")
+    estimator = _estimator(args)
+    scene = _load(args)
+    if args.resume and not state.exists():
+        print(f"no saved state at {state}: starting from the beginning")
+    result = render(scene, estimator, spp=args.spp, time=args.time, seed=args.seed, threads=args.threads,
+                    progress=not args.quiet, spectral=args.spectral, wavelength_sampling=args.wavelengths,
+                    state_file=state, save_every=args.save_every or None, resume=args.resume, keep_state=True,
+                    stop_on_signal=True)
+    stats = result.stats
+    written = _write_render(out, result, args) if stats["spp"] or not stats["stopped"] else []
+    print(f"colour: {stats['mode']} ({stats['mode_reason']})")
+    for line in stats["plan"]:
         print(f"plan: {line}")
-    for line in result.stats["warnings"]:
+    for line in stats["warnings"]:
         print(f"warning: {line}")
     print(result.summary())
+    if stats["stopped"]:
+        target = stats["budget"]
+        budget = f"{stats['spp']} of {target['spp']} spp" if target["spp"] is not None else (
+            f"{stats['spp']} spp in {stats['seconds']:.1f} of {target['time']:g} s")
+        saved = f"wrote {', '.join(written)} ({stats['spp']} spp)" if written else "no pass was complete, no image"
+        command = shlex.join(["pathspace", *args.argv] + ([] if args.resume else ["--resume"]))
+        print(f"stopped by {stats['stopped']} after {budget}: {saved}; the render's state is in {state}\n"
+              f"continue it with: {command}")
+        return 128 + signal.Signals[stats["stopped"]].value
+    state.unlink(missing_ok=True)
     print("wrote " + ", ".join(written))
     return 0
 
@@ -184,11 +252,11 @@ def _compare(args) -> int:
 
 
 def _info(args) -> int:
+    estimator = _estimator(args)
     scene = _load(args)
     print(scene.describe())
     reasons = scene.spectral_reasons()
     print(f"colour: {'spectral (' + '; '.join(reasons) + ')' if reasons else 'rgb (every colour is RGB)'}")
-    estimator = make_estimator(args.estimator, **dict(args.param))
     for line in estimator.plan(scene):
         print(f"plan: {line}")
     for line in estimator.warnings(scene):
@@ -197,8 +265,12 @@ def _info(args) -> int:
 
 
 def _reference(args) -> int:
-    from .reference import reference
+    from .reference import cache_folder, reference
 
+    _writable(Path(args.cache or cache_folder()) / "reference.exr")
+    if args.output:
+        _writable(Path(args.output))
+    _estimator(args)
     result = reference(_load(args), args.estimator, spp=args.spp, seed=args.seed, folder=args.cache, force=args.force,
                        progress=not args.quiet, **dict(args.param))
     print(result.summary())
@@ -218,26 +290,54 @@ def _converge(args) -> int:
         specs += [value] if ":" in value else [name.strip() for name in value.split(",") if name.strip()]
     checkpoints = [float(x) for x in args.checkpoints.split(",")] if args.checkpoints else None
     out = _writable(Path(args.output))
+    specs = [EstimatorSpec.parse(s) for s in specs]
+    for spec in specs:
+        spec.make()  # unknown estimators, keys and bad values fail before anything is loaded
     reference, _, _ = read_exr(args.reference)
-    result = converge(_load(args), [EstimatorSpec.parse(s) for s in specs], reference, time=args.time, spp=args.spp,
+    result = converge(_load(args), specs, reference, time=args.time, spp=args.spp,
                       checkpoints=checkpoints, seeds=range(args.seeds), threads=args.threads)
-    result.to_csv(out)
+    with atomic_output(out) as temporary:
+        result.to_csv(temporary)
     axes = convergence_plot(result, args.metric)
-    axes.figure.savefig(out.with_suffix(".png"), dpi=150, bbox_inches="tight")
+    with atomic_output(out.with_suffix(".png")) as temporary:
+        axes.figure.savefig(temporary, format="png", dpi=150, bbox_inches="tight")
     print(result.summary(args.metric).to_string())
     print(f"render time only (scene loading, BVH builds and snapshots excluded); wrote {out}, {out.with_suffix('.png')}")
     return 0
 
 
+def _export(args) -> int:
+    from .scene.mitsuba_export import export_mitsuba
+
+    out = _writable(Path(args.output))
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        written = export_mitsuba(_load(args), out)
+    for warning in caught:
+        print(f"warning: {warning.message}")
+    print(f"wrote {written[0]} and {len(written) - 1} PLY meshes in {out.parent / (out.stem + '-meshes')}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
-    """Entry point of the ``pathspace`` command."""
+    """Entry point of the ``pathspace`` command: the exit code (0; 2 for an error, reported in one line
+    on stderr; 130 or 143 for a render stopped by SIGINT or SIGTERM)."""
+    argv = sys.argv[1:] if argv is None else list(argv)
     args = _build_parser().parse_args(argv)
-    commands = {"render": _render, "compare": _compare, "info": _info, "reference": _reference, "converge": _converge}
+    args.argv = argv
+    commands = {"render": _render, "compare": _compare, "info": _info, "reference": _reference, "converge": _converge,
+                "export": _export}
     try:
         return commands[args.command](args)
-    except (SceneError, ValueError, FileNotFoundError, ImportError) as error:
+    except (SceneError, ValueError, OSError, ImportError) as error:
         print(f"pathspace {args.command}: error: {error}", file=sys.stderr)
         return 2
+    except MemoryError as error:
+        print(f"pathspace {args.command}: error: {str(error) or 'out of memory'}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"pathspace {args.command}: interrupted", file=sys.stderr)
+        return 128 + signal.SIGINT
 
 
 if __name__ == "__main__":

@@ -9,11 +9,10 @@ of the scene (t = 0 with a pinhole camera, ...) are drawn black and marked.
 from __future__ import annotations
 
 import os
-from pathlib import Path
 
 import numpy as np
 
-from .imageio import to_srgb8
+from .imageio import atomic_output, to_srgb8
 
 __all__ = ["strategy_layers", "write_contact_sheet"]
 
@@ -56,5 +55,5 @@ def write_contact_sheet(path: str | os.PathLike, strategies: dict, kind: str = "
             else:
                 draw.rectangle((left, top + LABEL_HEIGHT, left + width - 1, top + LABEL_HEIGHT + height - 1),
                                fill=(0, 0, 0))
-    Path(path).parent.mkdir(parents=True, exist_ok=True)
-    sheet.save(str(path))
+    with atomic_output(path) as temporary:
+        sheet.save(str(temporary), format="PNG")

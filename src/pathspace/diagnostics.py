@@ -1,6 +1,7 @@
 """What a render's running statistics say about it: exploding variance and paths of extreme length.
 
-The film keeps, per pass, the sum of its squared samples and the largest one.
+The film keeps, per pass, its largest |sample| and the sum of its squared
+samples relative to that peak's square (so that neither overflows).
 With finite variance the largest sample's share of the total second moment
 falls as samples accumulate; with infinite variance (for instance a Russian
 roulette that lifts throughputs faster than the surfaces absorb them, see
@@ -24,11 +25,16 @@ MIN_PASSES = 8            # ... once there are this many passes
 def second_moment_share(film) -> tuple[float, float]:
     """The largest single sample's share of the film's total second moment, over all passes and over the
     first half of them (0 before ``MIN_PASSES`` passes)."""
-    sums, peaks = np.asarray(film.pass_square_sums), np.asarray(film.pass_square_max)
-    half = sums.size // 2
-    if sums.size < MIN_PASSES or sums[:half].sum() <= 0:
+    peaks, relative = np.asarray(film.pass_peaks), np.asarray(film.pass_relative_square_sums)
+    half = peaks.size // 2
+    if peaks.size < MIN_PASSES or peaks[:half].max() <= 0:
         return 0.0, 0.0
-    return float(peaks.max() / sums.sum()), float(peaks[:half].max() / sums[:half].sum())
+    return _largest_share(peaks, relative), _largest_share(peaks[:half], relative[:half])
+
+
+def _largest_share(peaks: np.ndarray, relative: np.ndarray) -> float:
+    """max_p peak_p^2 / sum_p peak_p^2 relative_p, computed relative to the largest peak (no overflow)."""
+    return float(1.0 / np.sum((peaks / peaks.max()) ** 2 * relative))
 
 
 def second_moment_warnings(film) -> list[str]:

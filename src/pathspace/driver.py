@@ -4,13 +4,15 @@ The driver knows no estimator: it validates the request, builds the job
 (colour mode, film, sampler source, clock) and hands it to the estimator's
 ``render`` (see :mod:`pathspace.estimators.base`), which by default runs the
 passes x tiles loop.  Checkpoints develop the film during the render without
-restarting it.
+restarting it.  A render given a ``state_file`` saves its state while it
+runs and can be resumed from it (see :mod:`pathspace.resume`).
 """
 from __future__ import annotations
 
 import base64
 import os
 import re
+from contextlib import nullcontext
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any, Callable, Sequence
@@ -24,6 +26,8 @@ from .estimators import Estimator, make_estimator
 from .estimators.base import Budget, Checkpoint, RenderJob
 from .estimators.control import RenderControl
 from .film import Film
+from .memory import check_render_memory
+from .resume import Autosave, open_state, render_identity
 from .sampler import SamplerSource, StreamSamplers
 from .scene import Scene, load_scene
 from .spectra import colour_mode
@@ -58,10 +62,14 @@ class RenderResult:
     image : (height, width, 3) float64, the per-pixel mean in linear sRGB
     variance : (height, width, 3) float64, estimated variance of that mean
     stats : estimator, parameters, plan, colour mode and why, spp, seconds (of rendering: scene loading
-        and BVH builds excluded), samples per second, rays, nonfinite (pixel samples dropped at the film
-        for a NaN or Inf), nonfinite_contributions (bidirectional connections dropped for a NaN or Inf
-        value or weight; their sample is kept), truncated (paths cut at the safety depth),
-        longest_subpath (segments of the longest path, or subpath for bidirectional estimators), ...
+        and BVH builds excluded; a resumed render's include its earlier sessions), samples per second,
+        rays, nonfinite (pixel samples dropped at the film for a NaN or Inf), nonfinite_contributions
+        (bidirectional connections dropped for a NaN or Inf value or weight; their sample is kept),
+        truncated (paths cut at the safety depth), longest_subpath (segments of the longest path, or
+        subpath for bidirectional estimators), budget ({"spp", "time"}: what was asked for), stopped
+        (why the render stopped before the end of its budget, e.g. "SIGINT"; None), resumed ({"passes",
+        "seconds"} restored from a state file; None), saves (of the state file), ... Rays, rates and
+        the path counters cover this session only.
     film : the film with the raw sums (RGB, or XYZ for spectral renders) for merging or further passes
     xyz : (height, width, 3) CIE XYZ of a spectral render (None for RGB renders)
     """
@@ -112,6 +120,10 @@ class RenderResult:
             text += f"; {s['nonfinite_contributions']} non-finite connections were dropped"
         if s["truncated"]:
             text += f"; {s['truncated']} paths were cut at the safety depth"
+        if s["resumed"]:
+            text += f"; resumed at {s['resumed']['passes']} spp, {s['resumed']['seconds']:.2f} s"
+        if s["stopped"]:
+            text += f"; stopped ({s['stopped']}) before the end of its budget"
         if s["warnings"]:
             text += f"; {len(s['warnings'])} warning(s): " + " | ".join(s["warnings"])
         return text
@@ -121,7 +133,9 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
            time: float | None = None, seed: int = 0, threads: int | None = None, progress: bool = False,
            first_pass: int = 0, spectral: bool | None = None, wavelength_sampling: str = "uniform",
            checkpoints: Sequence[float] = (), on_checkpoint: Callable[[Checkpoint], None] | None = None,
-           samplers: SamplerSource | None = None, **params: Any) -> RenderResult:
+           samplers: SamplerSource | None = None, state_file: str | os.PathLike | None = None,
+           save_every: float | None = None, resume: bool = False, keep_state: bool = False,
+           stop_on_signal: bool = False, **params: Any) -> RenderResult:
     """Render ``scene`` with an estimator (a name and its ``params``, or an :class:`Estimator`).
 
     ``spp`` samples (passes) per pixel (default: the scene's ``[render]`` spp, else 16), or ``time``: the
@@ -137,6 +151,24 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
     with ``spp``, seconds with ``time`` -- and the film can be developed
     there.  ``samplers``: the source of random numbers (default
     :class:`~pathspace.sampler.StreamSamplers` of ``seed``).
+
+    Long renders (see :mod:`pathspace.resume`): with ``state_file``, the
+    render's state (the film of its completed passes, its render time and
+    what identifies it) is saved there every ``save_every`` seconds of wall
+    time (None: only when stopped) and when it is stopped; the file is removed
+    once the render completes its budget, unless ``keep_state`` (it then stays
+    as last saved: the command line removes it once the image is written, so
+    a crash in between loses no more than the time since that save).  An
+    existing state file is an error unless ``resume``: then the render
+    continues from it -- it must be the same render (scene, estimator and
+    parameters, seed, budget, colour mode, resolution), and the result is
+    bit for bit that of an uninterrupted render; ``resume`` without a state
+    file starts afresh.
+    With ``time``, the budget is the total render time of all sessions.
+    ``stop_on_signal``: SIGINT (Ctrl-C) and SIGTERM stop the render cleanly
+    -- the passes in flight are dropped, the state is saved, and the result
+    of the completed passes is returned with ``stats["stopped"]`` naming the
+    signal -- instead of raising KeyboardInterrupt (or ending the process).
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
@@ -148,44 +180,98 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
     seed, first_pass = integer(seed, "seed", low=0), integer(first_pass, "first_pass", low=0)
     threads = integer(_native.default_thread_count() if threads is None else threads, "threads", low=1)
     checkpoints = tuple(sorted(number(c, "checkpoints", low=0.0, low_open=True) for c in checkpoints))
+    if state_file is None and (save_every is not None or resume or keep_state):
+        raise ValueError("save_every, resume and keep_state need a state_file")
+    save_every = None if save_every is None else number(save_every, "save_every", low=0.0, low_open=True,
+                                                         what="a number of seconds > 0")
 
     estimator = estimator if isinstance(estimator, Estimator) else make_estimator(estimator, **params)
     estimator.check(scene)
     mode, mode_reason = colour_mode(scene, spectral, wavelength_sampling)
+    check_render_memory(scene, estimator, mode, threads)  # refuse, naming the setting, before the film exists
     _tune_allocator()
-    film = Film(scene.camera.width, scene.camera.height, covariance=mode.film_covariance, to_srgb=mode.film_to_srgb)
+    identity = state = None
+    if state_file is not None:
+        _check_resumable(scene, estimator, samplers)
+        identity = render_identity(scene, estimator, mode, seed=seed, first_pass=first_pass, spp=spp, time=time)
+        state = open_state(state_file, identity, resume)
+    if state is None:
+        film = Film(scene.camera.width, scene.camera.height, covariance=mode.film_covariance,
+                    to_srgb=mode.film_to_srgb)
+    else:
+        film = state.film
+    restored, restored_samples = film.passes, int(film.count.sum())
+    previous = state.seconds if state is not None else 0.0
     estimator.prepare(scene)  # build the BVHs it needs before the clock starts
+    autosave = Autosave(state_file, identity, save_every) if state_file is not None else None
     job = RenderJob(scene, mode, samplers or StreamSamplers(seed), film, threads, RenderControl(),
-                    progress=_progress_bar(progress, spp, estimator.name))
-    budget = Budget(spp, time, first_pass, checkpoints, "spp" if spp is not None else "seconds")
-    job.control.start()
+                    progress=_progress_bar(progress, spp, restored, estimator.name), autosave=autosave)
+    if spp is not None:  # this session renders the passes after the restored ones
+        budget = Budget(spp - restored, None, first_pass + restored, tuple(c - restored for c in checkpoints
+                                                                           if c > restored), "spp")
+    else:  # the clock starts at the earlier sessions' render time
+        budget = Budget(None, time, first_pass + restored, tuple(c for c in checkpoints if c > previous), "seconds")
+    job.control.start(previous)
     try:
-        estimator.render(job, budget, on_checkpoint)
+        with job.control.stop_on_signals() if stop_on_signal else nullcontext():
+            if budget.spp != 0 and (time is None or previous < time):
+                estimator.render(job, budget, on_checkpoint)
     finally:
         if job.progress is not None:
             job.progress.close()
     seconds = job.control.elapsed()
+    complete = film.passes >= spp if spp is not None else seconds >= time
+    stopped = job.control.reason if job.control.cancelled and not complete else None
+    if autosave is not None:
+        if stopped:
+            autosave.save(Checkpoint(film.passes, seconds, film))
+        elif not keep_state:
+            autosave.path.unlink(missing_ok=True)
     warnings = (estimator.warnings(scene) + second_moment_warnings(film)
                 + path_length_warnings(job.counters.longest, job.counters.truncated))
+    warnings += [] if scene.lights.count else ["the scene has no lights: the image is black"]
     if not film.passes:
-        warnings.append(f"no pass was complete when the time budget ({time:g} s) ran out: the image is empty; "
+        warnings.append(f"stopped ({stopped}) before any pass was complete: the image is empty" if stopped else
+                        f"no pass was complete when the time budget ({time:g} s) ran out: the image is empty; "
                         "give more time (one pass of this scene takes longer)")
     samples, counters = int(film.count.sum()), job.counters
+    session = seconds - previous  # render seconds of this call: what the rates and counters cover
+
+    def rate(count: int) -> float:
+        return count / session if session > 0 else 0.0
+
     stats = {"estimator": estimator.name, "params": estimator.params, "plan": estimator.plan(scene),
              "spp": film.passes, "seed": seed, "first_pass": first_pass, "threads": threads,
              "width": film.width, "height": film.height, "seconds": seconds, "samples": samples,
-             "samples_per_second": samples / seconds, "rays": counters.rays, "rays_per_second": counters.rays / seconds,
-             "mode": mode.name, "mode_reason": mode_reason, "nonfinite": film.nonfinite,
-             "nonfinite_contributions": counters.nonfinite_contributions, "truncated": counters.truncated,
-             "longest_subpath": counters.longest, "largest_sample_share": second_moment_share(film)[0],
-             "warnings": warnings, "clock": CLOCK, "scene": scene.source, **job.stats}
+             "samples_per_second": rate(samples - restored_samples), "rays": counters.rays,
+             "rays_per_second": rate(counters.rays), "mode": mode.name, "mode_reason": mode_reason,
+             "nonfinite": film.nonfinite, "nonfinite_contributions": counters.nonfinite_contributions,
+             "truncated": counters.truncated, "longest_subpath": counters.longest,
+             "largest_sample_share": second_moment_share(film)[0], "warnings": warnings, "clock": CLOCK,
+             "scene": scene.source, "budget": {"spp": spp, "time": time}, "stopped": stopped,
+             "resumed": {"passes": restored, "seconds": previous} if state is not None else None,
+             "state_file": None if state_file is None else str(state_file),
+             "saves": 0 if autosave is None else autosave.saves, **job.stats}
     return RenderResult(image=film.image(), variance=film.image_variance(), stats=stats, film=film,
                         xyz=film.mean() if mode.name == "spectral" else None)
 
 
-def _progress_bar(enabled: bool, total: int | None, estimator: str):
+def _check_resumable(scene: Scene, estimator: Estimator, samplers: SamplerSource | None) -> None:
+    """Refuse a ``state_file`` for renders that a state file cannot restore exactly."""
+    if type(estimator).render is not Estimator.render:
+        raise ValueError(f"state_file: estimator {estimator.name!r} renders with its own loop; only estimators "
+                         "on the passes loop (whole, independent passes) can be saved and resumed")
+    if samplers is not None:
+        raise ValueError("state_file: a render with its own samplers cannot be saved and resumed (a state "
+                         "restores the seeded streams of its seed only)")
+    if not scene.fingerprint:
+        raise ValueError("state_file: the scene has no fingerprint (load it with load_scene or scene_from_dict), "
+                         "so a resumed render could not check that it is the same scene")
+
+
+def _progress_bar(enabled: bool, total: int | None, done: int, estimator: str):
     if not enabled:
         return None
     from tqdm.auto import tqdm
 
-    return tqdm(total=total, unit="spp", desc=f"rendering ({estimator})", dynamic_ncols=True)
+    return tqdm(total=total, initial=done, unit="spp", desc=f"rendering ({estimator})", dynamic_ncols=True)

@@ -19,7 +19,7 @@ import numpy as np
 
 from .spectra import Blackbody, Colour, Illuminant, SampledSpectrum
 
-__all__ = ["Fields", "SceneError"]
+__all__ = ["Fields", "SceneError", "MAX_COORDINATE"]
 
 
 class SceneError(ValueError):
@@ -32,6 +32,17 @@ class SceneError(ValueError):
 _MISSING = object()
 # Integers beyond this are rejected before NumPy sees them (it cannot hold them in 64 bits).
 MAX_INTEGER = 2 ** 53
+# Geometry is traced in float32: positions and lengths must stay well inside its range (3.4e38), so that
+# differences and sums of them stay finite too.
+MAX_COORDINATE = 1e30
+
+
+def _finite_number(value: Any, integer: bool = False) -> bool:
+    """Whether a value read from a scene is a finite number (an integer if ``integer``) that NumPy can hold:
+    not a bool, and an integer no larger than MAX_INTEGER."""
+    if isinstance(value, bool) or not isinstance(value, int if integer else (int, float)):
+        return False
+    return abs(value) <= MAX_INTEGER if isinstance(value, int) else math.isfinite(value)
 
 
 def _show(value: Any) -> str:
@@ -148,6 +159,30 @@ class Fields:
                 raise self.error(expected, field)
         return np.array(value, dtype=np.int64 if integer else np.float64)
 
+    def point(self, field: str, default: Any = _MISSING) -> np.ndarray:
+        """A position: 3 finite numbers within +-MAX_COORDINATE (geometry is traced in float32)."""
+        value = self.vector(field, 3, default)
+        if np.abs(value).max() > MAX_COORDINATE:
+            raise self.error(f"expected 3 numbers within +-{MAX_COORDINATE:g} (positions are traced in float32), "
+                             f"got {value.tolist()}", field)
+        return value
+
+    def direction(self, field: str, default: Any = _MISSING) -> np.ndarray:
+        """A direction: 3 finite numbers, not all zero, scaled so that the largest magnitude is 1 (so that its
+        length neither overflows nor underflows)."""
+        value = self.vector(field, 3, default)
+        largest = np.abs(value).max()
+        if largest == 0:
+            raise self.error("must not be the zero vector", field)
+        return value / largest
+
+    def numbers(self, field: str, default: Any = _MISSING) -> np.ndarray:
+        """A non-empty list of finite numbers, as a float64 array."""
+        value = self._get(field, default)
+        if not (isinstance(value, (list, tuple)) and value and all(_finite_number(x) for x in value)):
+            raise self.error(f"expected a non-empty list of finite numbers, got {_show(value)}", field)
+        return np.array(value, dtype=np.float64)
+
     def array(self, field: str, columns: int, *, integer: bool = False) -> np.ndarray:
         """A non-empty list of rows of ``columns`` numbers, as an (M, columns) array."""
         value = self._get(field, _MISSING)
@@ -156,12 +191,8 @@ class Fields:
         if not isinstance(value, list) or not value:
             raise self.error(f"{expected}, got {_show(value)}", field)
         for i, row in enumerate(value):
-            ok = isinstance(row, (list, tuple)) and len(row) == columns and all(
-                not isinstance(x, bool) and isinstance(x, int if integer else (int, float))
-                and (not isinstance(x, int) or abs(x) <= MAX_INTEGER) for x in row)
-            if ok and not integer:
-                ok = all(math.isfinite(x) for x in row)
-            if not ok:
+            if not (isinstance(row, (list, tuple)) and len(row) == columns
+                    and all(_finite_number(x, integer) for x in row)):
                 raise self.error(f"{expected}; row {i} is {_show(row)}", field)
         return np.array(value, dtype=np.int64 if integer else np.float64)
 
@@ -190,10 +221,8 @@ class Fields:
         scale = fields.number("scale", 1.0, low=0.0)
         form = forms[0]
         if form == "wavelengths":
-            wavelengths, values = fields.raw("wavelengths"), fields.raw("values")
-            if not (isinstance(wavelengths, list) and isinstance(values, list)):
-                raise fields.error("expected lists of wavelengths (nm) and values of the same length", "wavelengths")
-            spectrum = fields.build(lambda: SampledSpectrum(tuple(wavelengths), tuple(values), scale))
+            wavelengths, values = fields.numbers("wavelengths"), fields.numbers("values")
+            spectrum = fields.build(lambda: SampledSpectrum(tuple(wavelengths.tolist()), tuple(values.tolist()), scale))
         elif form == "file":
             path = fields.file("file", "spectrum")
             spectrum = fields.build(lambda: SampledSpectrum.from_csv(path, scale))
@@ -224,8 +253,7 @@ class Fields:
                              field=None)
 
     def _check_number(self, value, field, low, high, low_open, high_open, what):
-        ok = (not isinstance(value, bool) and isinstance(value, (int, float))
-              and (not isinstance(value, int) or abs(value) <= MAX_INTEGER) and math.isfinite(value))
+        ok = _finite_number(value)
         if ok and low is not None:
             ok = value > low if low_open else value >= low
         if ok and high is not None:

@@ -7,6 +7,10 @@ optionally CIE XYZ as the ``xyz`` layer (``xyz.X/Y/Z``), further named layers
 (per-strategy images of bidirectional renders: ``s1t2.weighted.R``, ...), and render metadata
 as string attributes of the header, prefixed ``pathspace.``.  PNGs are 8-bit sRGB after an exposure
 scale, with the sRGB transfer function from colour-science.
+
+Every file is written through :func:`atomic_output`: to a temporary file in
+the same folder, flushed to disk, then renamed over the target, so a crash
+or a full disk never leaves a truncated file in place of a good one.
 """
 from __future__ import annotations
 
@@ -14,28 +18,42 @@ import json
 import os
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Any
+from typing import Any, Iterator
 
 import numpy as np
 
-__all__ = ["write_exr", "read_exr", "write_png", "png_bytes", "to_srgb8", "display"]
+__all__ = ["write_exr", "read_exr", "write_png", "png_bytes", "to_srgb8", "display", "atomic_output"]
 
 METADATA_PREFIX = "pathspace."
 
 
 @contextmanager
-def _atomic(path: str | os.PathLike):
-    """A temporary file beside ``path`` that replaces it only once written completely (no partial file
-    ever replaces a good one)."""
+def atomic_output(path: str | os.PathLike) -> Iterator[Path]:
+    """The path of a temporary file beside ``path`` (``.NAME.PID.tmp``, same folder, hence same file
+    system) for the caller to write; when the block ends without an exception, the file is flushed
+    to disk (fsync) and renamed over ``path`` (``os.replace``, atomic), and the rename is flushed too.
+    If the block fails, the temporary file is removed and ``path`` is untouched: no partial file ever
+    replaces a good one.  A process killed meanwhile leaves at most the hidden temporary file."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     temporary = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
         yield temporary
+        _fsync(temporary)
         os.replace(temporary, path)
+        _fsync(path.parent)
     finally:
         if temporary.exists():
             temporary.unlink()
+
+
+def _fsync(path: Path) -> None:
+    """Flush a file's (or a folder's: its entries) data to disk."""
+    descriptor = os.open(path, os.O_RDONLY)
+    try:
+        os.fsync(descriptor)
+    finally:
+        os.close(descriptor)
 
 
 def _check_image(image: np.ndarray, name: str) -> np.ndarray:
@@ -74,7 +92,7 @@ def write_exr(path: str | os.PathLike, image: np.ndarray, variance: np.ndarray |
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     for key, value in (metadata or {}).items():
         header[METADATA_PREFIX + key] = value if isinstance(value, str) else json.dumps(value, default=str)
-    with _atomic(path) as temporary:
+    with atomic_output(path) as temporary:
         with OpenEXR.File(header, channels) as exr:
             exr.write(str(temporary))
 
@@ -143,5 +161,5 @@ def write_png(path: str | os.PathLike, image: np.ndarray, exposure: float = 0.0)
     from PIL import Image
 
     image = _check_image(image, "image")
-    with _atomic(path) as temporary:
+    with atomic_output(path) as temporary:
         Image.fromarray(to_srgb8(image, exposure), mode="RGB").save(str(temporary), format="PNG")

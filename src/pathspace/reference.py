@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-from .imageio import read_exr, write_exr
+from .imageio import atomic_output, read_exr, write_exr
 from .metrics import predicted_relmse
 from .scene import Scene, load_scene
 
@@ -81,6 +81,7 @@ def reference(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: i
                 "predicted_relmse_high": predicted.high, "nonfinite": result.stats["nonfinite"]}
     folder.mkdir(parents=True, exist_ok=True)
     write_exr(path, result.image, result.variance, {"reference": json.dumps(metadata, default=str)})
-    path.with_suffix(".json").write_text(json.dumps(metadata, indent=2, default=str))
+    with atomic_output(path.with_suffix(".json")) as temporary:
+        temporary.write_text(json.dumps(metadata, indent=2, default=str))
     image, variance, _ = read_exr(path)  # what a later call will read: float32 pixels
     return Reference(image.astype(np.float64), variance.astype(np.float64), metadata, path)

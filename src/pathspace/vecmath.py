@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["dot", "orthonormal_basis", "Frame", "leave_distance", "segment_span", "MIN_LEAVING_COS"]
+__all__ = ["dot", "orthonormal_basis", "Frame", "gamma", "offset_origin", "shadow_ray", "FLOAT32_ROUNDOFF"]
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -48,22 +48,53 @@ class Frame:
         return v[0] * self.s + v[1] * self.t + v[2] * self.n
 
 
-# Rays leaving within this cosine of a surface's tangent plane start at the distance they would at
-# this cosine: closer to grazing, epsilon / |cos| would skip geometry near the surface.
-MIN_LEAVING_COS = 1e-3
+# Floating-point error bounds (Higham 2002, sec. 3.1; pbrt-v4, sec. 6.8.1): with the unit roundoff u of
+# float32, a result of n roundings is within gamma(n) = n u / (1 - n u) of its exact value, relatively.
+FLOAT32_ROUNDOFF = 2.0 ** -24
 
 
-def leave_distance(epsilon: np.ndarray, cos: np.ndarray) -> np.ndarray:
-    """Distance (float32) along a ray leaving a surface at which it starts: epsilon / |cos| (see
-    ``pathspace.scene.mesh.RAY_OFFSET_RELATIVE``); ``cos`` is between the ray and the surface normal."""
-    return (epsilon / np.maximum(np.abs(cos), np.float32(MIN_LEAVING_COS))).astype(np.float32)
+def gamma(n: int) -> float:
+    """pbrt's gamma_n = n u / (1 - n u) for float32's unit roundoff u = 2^-24."""
+    return n * FLOAT32_ROUNDOFF / (1.0 - n * FLOAT32_ROUNDOFF)
 
 
-def segment_span(start_eps, start_cos, end_eps, end_cos, length) -> tuple[np.ndarray, np.ndarray]:
-    """(tmin, tmax), as fractions of the segment, of a shadow ray p -> q that must not see the surfaces
-    at either end; ``*_eps`` are the surfaces' ray offsets (0 at points off any surface, like point
-    lights and lens points) and ``*_cos`` the cosines there; ``length`` = |q - p|."""
+# The far end o_a + 1 d of a shadow ray o_a -> o_b misses o_b by the rounding of d = o_b - o_a, and
+# Embree's plane test at t ~ 1 computes (v - o_a) . n, of terms about as large as d: together, within this
+# many roundings of sum_c |n_c| |d_c| along the far surface's normal n (the terms of the far triangle's own
+# extent are within its error bound epsilon, by which o_b already stands off it).
+SHADOW_END_ROUNDINGS = 4
+
+
+def offset_origin(p: np.ndarray, n: np.ndarray, epsilon: np.ndarray, w: np.ndarray) -> np.ndarray:
+    """Ray origins (3, N) float32 for rays leaving surface points ``p`` in directions ``w``: ``p`` moved by
+    ``epsilon`` along the unit normals ``n``, to the side ``w`` points to (pbrt-v4's ``OffsetRayOrigin``,
+    sec. 6.8.6).  ``epsilon`` bounds the error of ``p`` along ``n`` (see
+    :class:`pathspace.scene.mesh.TriangleMesh`), so the origin lies on the right side of the true surface
+    and the ray starts at t = 0 -- no offset along the ray, which would grow as 1 / |cos| at grazing
+    angles.  Points off any surface (lights, the lens) have ``epsilon`` 0 and stay where they are."""
+    side = np.where(dot(n, w) < 0, -epsilon, epsilon).astype(np.float32)
+    return (p + n * side).astype(np.float32)
+
+
+def shadow_ray(a: np.ndarray, n_a: np.ndarray, eps_a: np.ndarray, b: np.ndarray, n_b: np.ndarray,
+               eps_b: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(origin, direction, tmax) of the ray testing the segment between surface points ``a`` and ``b``
+    (3, N) float32 with normals ``n_*`` and error bounds ``eps_*`` (0 off surfaces).
+
+    Both ends are offset toward each other (pbrt-v4's ``SpawnRayTo``); the ray runs from the offset
+    ``a`` (t = 0) to the offset ``b`` (t = 1).  Where ``b`` is on a surface, the ray's end point is
+    itself only known to within a few roundings of d = o_b - o_a (see ``SHADOW_END_ROUNDINGS``), so the
+    ray stops that far -- measured along ``b``'s normal -- short of it: tmax = 1 - slack / |d . n_b| with
+    slack = gamma(4) sum_c |n_b,c| |d_c|.  The span left untested is the slab within eps_b + slack of
+    ``b``'s surface, a few float32 roundings of the segment's length; it does not grow at grazing angles.
+    """
+    w = b - a
+    origin = offset_origin(a, n_a, eps_a, w)
+    end = offset_origin(b, n_b, eps_b, -w)
+    direction = end - origin
+    spread = np.abs(n_b[0] * direction[0]) + np.abs(n_b[1] * direction[1]) + np.abs(n_b[2] * direction[2])
+    slack = np.where(eps_b > 0, gamma(SHADOW_END_ROUNDINGS) * spread, 0.0)
+    across = np.abs(dot(direction, n_b))
     with np.errstate(divide="ignore", invalid="ignore"):
-        tmin = np.where(length > 0, leave_distance(start_eps, start_cos) / length, 0.0)
-        tmax = np.where(length > 0, 1.0 - leave_distance(end_eps, end_cos) / length, 0.0)
-    return tmin.astype(np.float32), tmax.astype(np.float32)
+        tmax = np.where(slack > 0, 1.0 - slack / across, 1.0)
+    return origin, direction, np.maximum(tmax, 0.0).astype(np.float32)

@@ -151,7 +151,3 @@ def test_parameter_errors():
         ps.estimators.make_estimator("bdpt", max_depth=0)
     with pytest.raises(ValueError, match=r"longer than max_depth=2"):
         ps.estimators.make_estimator("bdpt", mis="single", strategy=(2, 2), max_depth=2)
-    with pytest.raises(ValueError, match="light tracing needs at least one light"):
-        data = scene_dict("cornell-box", (4, 4))
-        data["shapes"][0].pop("emitter")
-        ps.render(ps.scene_from_dict(data), "lt", spp=1)

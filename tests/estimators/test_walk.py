@@ -54,7 +54,9 @@ def walk_densities(scene, sub, roulette):
             continue
         rows.append((prev, here, nxt))
     prev, here, nxt = (np.array(column) for column in zip(*rows))
-    # float32 positions of nearly coincident vertices (in corners) do not give their distance to 1e-4
+    # float32 positions of nearly coincident vertices (in corners) do not give their distance to 1e-4, and a
+    # ray leaves from its vertex moved off the surface by the error bound (~1e-6): at 0.02 apart the line
+    # between two vertices and the sampled direction differ by ~1e-4 rad, up to 1e-3 in grazing cosines
     apart = np.minimum(np.linalg.norm(sub.p[:, nxt] - sub.p[:, here], axis=0),
                        np.linalg.norm(sub.p[:, prev] - sub.p[:, here], axis=0)) > 0.02
     prev, here, nxt = prev[apart], here[apart], nxt[apart]
@@ -93,19 +95,19 @@ def test_recorded_densities_are_the_sampled_ones(params, local):
             return scene.materials.albedo[sub.material[v]]
         nxt, fwd, prev, rev = walk_densities(scene, sub, roulette)
         assert nxt.size > 100
-        np.testing.assert_allclose(sub.fwd[nxt], fwd, rtol=2e-4)
-        np.testing.assert_allclose(sub.rev[prev], rev, rtol=2e-4)
+        np.testing.assert_allclose(sub.fwd[nxt], fwd, rtol=2e-3)
+        np.testing.assert_allclose(sub.rev[prev], rev, rtol=2e-3)
         np.testing.assert_array_equal(sub.q[nxt - 1], roulette(nxt - 1))
 
 
-def test_stale_fields_keep_their_dtype_through_split_and_extend():
-    """Regression (CI failure): a wavefront emptied with a stale field, split and extended again, used to
-    turn that field into an object array that Embree refused."""
+def test_an_emptied_wavefront_keeps_its_dtypes_through_split_and_extend():
+    """Regression (CI failure): a wavefront emptied, split and extended again once turned a field into an
+    object array that Embree refused."""
     from pathspace.estimators.wavefront import Lanes
 
-    lanes = Lanes(("depth", "tmin"), depth=np.arange(4, dtype=np.int32), tmin=np.zeros(4, np.float32))
-    lanes.keep(np.array([], dtype=np.int64), stale=("tmin",))
+    lanes = Lanes(("depth", "origin"), depth=np.arange(4, dtype=np.int32), origin=np.zeros((3, 4), np.float32))
+    lanes.keep(np.array([], dtype=np.int64))
     deep = lanes.split(np.array([], dtype=np.int64))
-    deep.extend(Lanes(("depth", "tmin"), depth=np.ones(3, np.int32), tmin=np.full(3, 0.5, np.float32)))
-    assert deep.tmin.dtype == np.float32 and deep.depth.dtype == np.int32
-    np.testing.assert_array_equal(deep.tmin, [0.5, 0.5, 0.5])
+    deep.extend(Lanes(("depth", "origin"), depth=np.ones(3, np.int32), origin=np.full((3, 3), 0.5, np.float32)))
+    assert deep.origin.dtype == np.float32 and deep.depth.dtype == np.int32
+    np.testing.assert_array_equal(deep.origin, np.full((3, 3), 0.5))

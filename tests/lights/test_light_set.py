@@ -23,6 +23,7 @@ def two_light_scene(extra_lights=()):
                            "edge_v": [0, 0.2, 0], "material": "white",
                            "emitter": {"radiance": [8.0] * 3, "two_sided": True}})
     data["lights"] = list(extra_lights)
+    data["render"] = {"origin": [0.0, 0.0, 0.0]}  # render space = world space: receivers below are world points
     return ps.scene_from_dict(data)
 
 

@@ -20,7 +20,7 @@ def test_mesh_files_through_trimesh(tmp_path, suffix):
     box = scene.mesh.shape == 0
     assert box.sum() == 12
     np.testing.assert_allclose(scene.mesh.area[box].sum(), 4 * 2 * (1 * 2 + 2 * 3 + 1 * 3))
-    corners = scene.mesh.vertices[np.unique(scene.mesh.indices[box])]
+    corners = scene.to_world(scene.mesh.vertices)[np.unique(scene.mesh.indices[box])]
     # Scaled by 2, turned 90 degrees about y (x and z swap), moved to x = 10.
     np.testing.assert_allclose(corners.min(axis=0), [10 - 3, -2, -1], atol=1e-12)
     np.testing.assert_allclose(corners.max(axis=0), [10 + 3, 2, 1], atol=1e-12)
@@ -35,9 +35,9 @@ def test_builtin_shapes():
     sphere, box = scene.mesh.shape == 0, scene.mesh.shape == 2
     # An inscribed icosphere of 5120 faces has 99.8% of the sphere's area.
     assert 0.997 < scene.mesh.area[sphere].sum() / (np.pi) < 1.0
-    centroids = scene.mesh.vertices[scene.mesh.indices[sphere]].mean(axis=1) - [1, 2, 3]
+    centroids = scene.to_world(scene.mesh.vertices)[scene.mesh.indices[sphere]].mean(axis=1) - [1, 2, 3]
     assert np.all(np.sum(centroids * scene.mesh.normal[:, sphere].T, axis=1) > 0)  # outward
     np.testing.assert_allclose(scene.mesh.area[box].sum(), 2 * (2 + 8 + 4))
-    centroids = scene.mesh.vertices[scene.mesh.indices[box]].mean(axis=1) - [0, 0, -5]
+    centroids = scene.to_world(scene.mesh.vertices)[scene.mesh.indices[box]].mean(axis=1) - [0, 0, -5]
     assert np.all(np.sum(centroids * scene.mesh.normal[:, box].T, axis=1) < 0)  # flipped: inward
 

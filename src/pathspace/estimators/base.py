@@ -147,8 +147,9 @@ class ItemResult:
 @dataclass
 class Budget:
     """How long a render runs: ``spp`` passes, or the passes completed within ``seconds`` (work still
-    in flight then is dropped), from pass ``first_pass`` on; ``checkpoints``: sorted pass counts or
-    seconds (as ``checkpoint_unit`` says) at which the film is developed."""
+    in flight then is dropped), from pass ``first_pass`` on; ``checkpoints``: sorted counts of the
+    passes rendered by this call, or render seconds (as ``checkpoint_unit`` says), at which the film
+    is developed."""
 
     spp: int | None = None
     seconds: float | None = None
@@ -178,6 +179,7 @@ class RenderJob:
     threads: int
     control: RenderControl
     progress: Any = None          # an object with update(passes), or None
+    autosave: Any = None          # an object with due() -> bool and save(Checkpoint), or None (pathspace.resume)
     counters: Counters = field(default_factory=Counters)
     stats: dict = field(default_factory=dict)  # further statistics an estimator reports
 

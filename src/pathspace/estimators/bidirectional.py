@@ -113,6 +113,15 @@ class Bidirectional(Estimator):
         """Longest path in segments that connections may form."""
         return self.max_depth if self.max_depth > 0 else SAFETY_VERTICES
 
+    def film_layers(self, scene) -> int:
+        """The most per-strategy layers a render of ``scene`` records: a weighted and an unweighted one per
+        strategy (s, t) of every path length up to ``pyramid`` -- t = 1 only without camera subpaths, no
+        t = 0 with a pinhole camera (see :meth:`_record_strategies`)."""
+        lengths = range(1, min(self.pyramid, self.depth_limit) + 1)
+        if not self.uses_camera_subpaths:
+            return 2 * len(lengths)
+        return 2 * sum(length + 2 - bool(scene.camera.delta_position) for length in lengths)
+
     def _contributions(self, batch: Batch) -> Iterator[Contributions]:
         """The unweighted contributions of the strategies this estimator uses, part by part."""
         raise NotImplementedError

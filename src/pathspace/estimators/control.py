@@ -1,4 +1,4 @@
-"""The clock and the brakes of a render: elapsed time without pauses, pausing, a deadline, cancelling.
+"""The clock and the brakes of a render: elapsed time without pauses, pausing, a deadline, stopping.
 
 Estimators call :meth:`RenderControl.check` between wavefront steps (a
 bounce, a subpath vertex, a batch of connections).  It returns at once while
@@ -10,13 +10,24 @@ worker failed, or the user stopped it) or -- with a time budget -- its
 deadline has passed: a running item checks the clock, so a budget is met
 however long the paths are (the unfinished work is dropped; the film holds
 whole passes only, possibly none: the render then says so).
+
+:meth:`RenderControl.stop` asks for the same clean stop from anywhere,
+including a signal handler: it only sets a flag, which the workers see at
+their next check, so no exception is ever raised in the middle of NumPy or
+the C extension.  :meth:`RenderControl.stop_on_signals` turns SIGINT
+(Ctrl-C) and SIGTERM into such stops for the duration of a render.
 """
 from __future__ import annotations
 
+import signal
 import threading
 import time
+from contextlib import contextmanager
+from typing import Iterator
 
-__all__ = ["Interrupted", "RenderControl"]
+__all__ = ["Interrupted", "RenderControl", "STOP_SIGNALS"]
+
+STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)  # what stop_on_signals turns into a clean stop
 
 
 class Interrupted(Exception):
@@ -32,12 +43,12 @@ class RenderControl:
         self._paused_total = 0.0
         self._running = threading.Event()
         self._running.set()
-        self.reason = ""  # why the render was cancelled; empty while it runs
+        self.reason = ""  # why the render was cancelled or stopped; empty while it runs
         self.deadline: float | None = None  # render seconds after which check() stops the workers
 
-    def start(self) -> None:
-        """Start the clock."""
-        self._start = time.perf_counter()
+    def start(self, offset: float = 0.0) -> None:
+        """Start the clock at ``offset`` seconds: the render time of earlier sessions of a resumed render."""
+        self._start = time.perf_counter() - offset
 
     def elapsed(self) -> float:
         """Seconds of rendering since :meth:`start`, pauses excluded."""
@@ -64,9 +75,44 @@ class RenderControl:
         self.reason = reason or "cancelled"
         self._running.set()
 
+    def stop(self, reason: str = "stopped") -> None:
+        """Ask the render to stop at the workers' next :meth:`check`, keeping the passes it completed.
+
+        Safe in a signal handler: it sets a flag and takes no lock (paused
+        workers see it when the render resumes them).
+        """
+        self.reason = reason or "stopped"
+
+    @contextmanager
+    def stop_on_signals(self) -> Iterator[None]:
+        """While in this block, SIGINT and SIGTERM :meth:`stop` the render (the reason is the signal's name,
+        e.g. "SIGINT"); the first such signal restores the previous handlers, so a second one acts as it
+        would have without this block.  Outside the main thread (where Python runs signal handlers) this
+        does nothing."""
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        # getsignal gives None for a handler installed from C: nothing Python can reinstall, so the default.
+        previous = {number: signal.getsignal(number) or signal.SIG_DFL for number in STOP_SIGNALS}
+
+        def restore() -> None:
+            for number, handler in previous.items():
+                signal.signal(number, handler)
+
+        def handler(number: int, frame) -> None:
+            restore()
+            self.stop(signal.Signals(number).name)
+
+        for number in STOP_SIGNALS:
+            signal.signal(number, handler)
+        try:
+            yield
+        finally:
+            restore()
+
     @property
     def cancelled(self) -> bool:
-        """Whether :meth:`cancel` was called."""
+        """Whether :meth:`cancel` or :meth:`stop` was called."""
         return bool(self.reason)
 
     def check(self) -> None:

@@ -43,11 +43,6 @@ class LightTracer(Bidirectional):
             lines.append("environment seen directly: not formed (an infinite light cannot be joined to the camera)")
         return lines
 
-    def check(self, scene) -> None:
-        """Raise ValueError if the scene has no light to trace from."""
-        if not scene.lights.count:
-            raise ValueError("light tracing needs at least one light")
-
     def _contributions(self, batch: Batch):
         part = lens_samples(batch)
         if part is not None:

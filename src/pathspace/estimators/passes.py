@@ -9,7 +9,10 @@ items as it needs them -- NumPy and Embree release the GIL in their inner
 loops -- and the main thread hands results to the film in item order, so the
 same seed gives the bit-identical image whatever the thread count.  Items
 never straddle a checkpoint given in passes, and a checkpoint in seconds
-falls between two items, so every checkpoint sees whole passes.
+falls between two items, so every checkpoint sees whole passes.  A render
+that saves its state (``job.autosave``, see :mod:`pathspace.resume`) saves at
+such moments too -- whole passes, with the clock paused -- once its interval
+has passed.
 """
 from __future__ import annotations
 
@@ -104,22 +107,32 @@ def _work_items(job: RenderJob, budget: Budget, tile: int, size: Callable[[], in
 
 
 class _Checkpoints:
-    """Fires ``on_checkpoint`` once the film has reached each checkpoint, with the clock paused."""
+    """Fires ``on_checkpoint`` once the film has reached each checkpoint, and saves the render's state
+    when ``job.autosave`` says it is due, with the clock paused and whole passes on the film."""
 
     def __init__(self, budget: Budget, job: RenderJob, on_checkpoint: Callable[[Checkpoint], None] | None) -> None:
         self.pending = sorted(budget.checkpoints) if on_checkpoint is not None else []
         self.unit, self.job, self.callback = budget.checkpoint_unit, job, on_checkpoint
+        self.start = job.film.passes  # a resumed render's film starts with the passes of earlier sessions
 
     def update(self) -> None:
-        film, control = self.job.film, self.job.control
-        reached = film.passes if self.unit == "spp" else control.elapsed()
-        if not self.pending or self.pending[0] > reached or film.incomplete_passes or not film.passes:
+        film, control, autosave = self.job.film, self.job.control, self.job.autosave
+        if film.incomplete_passes or not film.passes:
+            return
+        reached = film.passes - self.start if self.unit == "spp" else control.elapsed()
+        checkpoint = bool(self.pending) and self.pending[0] <= reached
+        save = autosave is not None and autosave.due()
+        if not checkpoint and not save:
             return
         while self.pending and self.pending[0] <= reached:
             self.pending.pop(0)
         control.pause()
         try:
-            self.callback(Checkpoint(film.passes, control.elapsed(), film))
+            state = Checkpoint(film.passes, control.elapsed(), film)
+            if checkpoint:
+                self.callback(state)
+            if save:
+                autosave.save(state)
         finally:
             control.resume()
 

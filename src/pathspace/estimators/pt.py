@@ -60,7 +60,7 @@ from ..mis import TWO_STRATEGY, mis_weight
 from ..roulette import RussianRoulette, roulette_warnings
 from ..sampler import Sampler
 from ..spectra import RGBMode
-from ..vecmath import dot, leave_distance
+from ..vecmath import dot, offset_origin
 from . import parameters as p
 from .base import TILE_PIXELS, Counters, Estimator, ItemResult, RenderJob, WorkItem, parameter
 from .visibility import light_sample_blocked
@@ -245,7 +245,7 @@ class PathTracer(Estimator):
         n = pixels.size
         lanes = Lanes(PATH_FIELDS + mode.path_fields, ticket=tickets, depth=np.zeros(n, dtype=np.int32),
                       origin=np.ascontiguousarray(origin, dtype=np.float32), direction=direction,
-                      tmin=np.zeros(n, dtype=np.float32), beta=np.ones((mode.channels, n)),
+                      beta=np.ones((mode.channels, n)),
                       radiance=np.zeros((mode.channels, n)),
                       pdf=np.zeros(n), delta=np.ones(n, dtype=bool),  # the camera: no light sample could
                       **mode.start(u.wavelengths))                    # have produced what its rays find
@@ -264,7 +264,7 @@ class PathTracer(Estimator):
         if not hit.all():
             alive = np.flatnonzero(hit)
             self._retire(bounce, lanes, ~hit)
-            prim, b1, b2, t = walk.keep(alive, prim, b1, b2, t, stale=("tmin",))  # all get a new ray below
+            prim, b1, b2, t = walk.keep(alive, prim, b1, b2, t)
             if not walk.size:
                 return
         arrival = walk.arrive(prim, b1, b2, t)
@@ -275,7 +275,7 @@ class PathTracer(Estimator):
             bounce.counters.truncated += int(np.count_nonzero(stop & (lanes.depth >= SAFETY_DEPTH)))
             self._retire(bounce, lanes, stop)
             alive = np.flatnonzero(~stop)
-            walk.keep(alive, stale=("tmin",))
+            walk.keep(alive)
             arrival = arrival.keep(alive)
             if not walk.size:
                 return
@@ -400,7 +400,7 @@ class PathTracer(Estimator):
             use_light &= ~materials.delta
         wi = np.where(use_light, ls.wi, sample.wi)
         f_cos, pdf_bsdf = materials.eval(surface, wi)
-        pdf_light = self._light_density(scene, p, leave_distance(arrival.eps, dot(surface.n, wi)), wi)
+        pdf_light = self._light_density(scene, p, offset_origin(p, arrival.normal, arrival.eps, wi), wi)
         alpha = self.mixture_alpha
         pdf = alpha * pdf_light + (1.0 - alpha) * pdf_bsdf
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -410,11 +410,11 @@ class PathTracer(Estimator):
         sample.weight = np.where(delta, sample.weight, weight)
         sample.pdf = np.where(delta, sample.pdf, pdf)
 
-    def _light_density(self, scene, receivers, tmin, direction):
+    def _light_density(self, scene, receivers, origins, direction):
         """Solid-angle density with which light sampling at ``receivers`` produces each direction.
 
-        Sums over every emitting triangle the ray meets (found with an
-        emitter-only BVH, hit after hit) and the environment.
+        Sums over every emitting triangle the ray from ``origins`` (the receivers, offset off their
+        surface) meets -- found with an emitter-only BVH, hit after hit -- and the environment.
         """
         lights = scene.lights
         count = direction.shape[1]
@@ -426,7 +426,7 @@ class PathTracer(Estimator):
             return total
         emitters = scene.emitter_accel
         lanes = np.arange(count)
-        o, d = receivers, direction
+        o, d, tmin = origins, direction, np.float32(0)
         while lanes.size:
             h = emitters.intersect(o, d, tmin, np.inf, normals=False, threads=1)
             found = np.flatnonzero(h.prim >= 0)

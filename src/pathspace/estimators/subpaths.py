@@ -42,7 +42,7 @@ import numpy as np
 
 from ..bsdfs import MaterialLanes, Surface
 from ..roulette import RussianRoulette
-from ..vecmath import dot
+from ..vecmath import dot, offset_origin
 from .base import Counters
 from .control import RenderControl
 from .walk import WALK_FIELDS, Arrival, Dimensions, Walk
@@ -315,7 +315,7 @@ class _Growth:
         """Note the rays that pass through a thin lens before hitting anything."""
         lanes = self.walk.lanes
         t_lens, on_lens = self.settings.scene.camera.intersect_lens(lanes.origin, lanes.direction)
-        on_lens &= (t_lens < t_hit) & (t_lens > lanes.tmin)
+        on_lens &= (t_lens < t_hit) & (t_lens > 0)
         k = np.flatnonzero(on_lens)
         if k.size:
             d = np.take(lanes.direction, k, axis=1)
@@ -337,7 +337,7 @@ class _Growth:
 
 
 def _walk_lanes(count: int, **state: np.ndarray) -> Lanes:
-    """Walk state of ``count`` lanes leaving vertex 0: ``origin``, ``direction``, ``tmin``, ``beta``, ``pdf``,
+    """Walk state of ``count`` lanes leaving vertex 0: ``origin``, ``direction``, ``beta``, ``pdf``,
     ``prev_n`` and ``prev_infinite`` (vertex 0's normal and whether it is at infinity), and any extra fields."""
     return Lanes(_WALK_FIELDS + tuple(f for f in state if f not in _WALK_FIELDS), depth=np.zeros(count, np.int32),
                  delta=np.zeros(count, bool), lane=np.arange(count), q=np.ones(count), **state)
@@ -360,9 +360,8 @@ def camera_subpaths(settings: SubpathSettings, pixels: np.ndarray, sampler) -> S
     recorder = _Recorder()
     record = recorder.add(np.arange(count), 0, CAMERA, p=origin, n=axis, beta=np.ones((channels, count)),
                           fwd=np.full(count, 1.0 / camera.lens_area), u=np.zeros((CAMERA_VERTEX.sizes["connect"], count)))
-    lanes = _walk_lanes(count, origin=origin, direction=direction, tmin=np.zeros(count, np.float32),
-                        beta=np.ones((channels, count)), pdf=camera.pdf_direction(direction, origin), prev_n=axis,
-                        prev_infinite=np.zeros(count, bool))
+    lanes = _walk_lanes(count, origin=origin, direction=direction, beta=np.ones((channels, count)),
+                        pdf=camera.pdf_direction(direction, origin), prev_n=axis, prev_infinite=np.zeros(count, bool))
     walk = Walk(scene, lanes, sampler, settings.camera_roulette, CAMERA_VERTEX)
     growth = _Growth(settings, walk, settings.light_roulette, recorder, record, count)
     growth.escapes = scene.lights.environment is not None
@@ -400,8 +399,9 @@ def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool) -
     if settings.light_roulette.policy == "throughput":  # the throughput is measured relative to the light's ray
         start = beta.max(axis=0)
         extra["rr_scale"] = np.divide(1.0, start, out=np.zeros_like(start), where=start > 0)
-    lanes = _walk_lanes(count, origin=e.point.astype(np.float32), direction=e.direction, tmin=e.tmin, beta=beta,
-                        pdf=pdf, prev_n=e.normal, prev_infinite=e.infinite, **extra)
+    origin = offset_origin(e.point.astype(np.float32), e.normal, e.epsilon, e.direction)
+    lanes = _walk_lanes(count, origin=origin, direction=e.direction, beta=beta, pdf=pdf, prev_n=e.normal,
+                        prev_infinite=e.infinite, **extra)
     walk = Walk(scene, lanes, sampler, settings.light_roulette, LIGHT_VERTEX, "importance")
     growth = _Growth(settings, walk, settings.camera_roulette, recorder, record, count)
     growth.lens_hits = [] if lens else None

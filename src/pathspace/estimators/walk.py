@@ -18,8 +18,8 @@ densities for subpaths):
 ``alive = walk.scatter(hit, ...)``     throughput, roulette, and the next ray from a BSDF sample
 
 Per lane (``WALK_FIELDS``): ``depth`` segments traced, ``origin`` (3, N)
-float32 and ``direction`` (3, N) float32 unit of the current ray, which
-starts ``tmin`` along it (see :func:`pathspace.vecmath.leave_distance`);
+float32 and ``direction`` (3, N) float32 unit of the current ray (which
+leaves a surface from just off it, see :func:`pathspace.vecmath.offset_origin`);
 ``beta`` (C, N) float64 throughput; ``pdf`` (N,) the solid-angle density of
 the current direction (of a delta lobe: its discrete probability); ``delta``
 whether it was a delta lobe; and, for walks whose vertex densities matter
@@ -39,12 +39,12 @@ import numpy as np
 
 from ..bsdfs import BSDFSample, Surface
 from ..roulette import RussianRoulette
-from ..vecmath import dot, leave_distance
+from ..vecmath import dot, offset_origin
 from .wavefront import Lanes
 
 __all__ = ["WALK_FIELDS", "Arrival", "Dimensions", "Walk"]
 
-WALK_FIELDS = ("depth", "origin", "direction", "tmin", "beta", "pdf", "delta")
+WALK_FIELDS = ("depth", "origin", "direction", "beta", "pdf", "delta")
 
 
 class Dimensions:
@@ -126,13 +126,12 @@ class Walk:
         lanes = self.lanes
         lanes.depth += 1
         self.rays += lanes.size
-        return self.scene.accel.intersect(lanes.origin, lanes.direction, lanes.tmin, normals=False, threads=1)
+        return self.scene.accel.intersect(lanes.origin, lanes.direction, normals=False, threads=1)
 
-    def keep(self, indices: np.ndarray, *arrays: np.ndarray, stale: tuple[str, ...] = ()):
+    def keep(self, indices: np.ndarray, *arrays: np.ndarray):
         """Keep only lanes ``indices`` (increasing): their state, their sampler, and the per-lane ``arrays``
-        (last axis), which are returned compacted.  Fields named in ``stale`` are left uninitialised (the
-        caller replaces them)."""
-        self.lanes.keep(indices, stale)
+        (last axis), which are returned compacted."""
+        self.lanes.keep(indices)
         self.sampler.keep(indices)
         return tuple(np.take(a, indices, axis=-1) for a in arrays)
 
@@ -189,6 +188,5 @@ class Walk:
         lanes.pdf, lanes.delta, lanes.direction = sample.pdf, sample.delta, sample.wi
         if sample.eta is not None and "eta_scale" in lanes.fields:
             lanes.eta_scale = lanes.eta_scale * sample.eta * sample.eta
-        lanes.origin = hit.p
-        lanes.tmin = leave_distance(hit.eps, dot(hit.normal, sample.wi))
+        lanes.origin = offset_origin(hit.p, hit.normal, hit.eps, sample.wi)
         return alive

@@ -72,13 +72,10 @@ class Lanes:
     def size(self) -> int:
         return int(getattr(self, self.fields[0]).shape[-1])
 
-    def keep(self, indices: np.ndarray, stale: tuple[str, ...] = ()) -> None:
-        """Keep only the lanes ``indices``; fields named in ``stale`` are left uninitialised (same dtype and
-        shape, the caller replaces them)."""
+    def keep(self, indices: np.ndarray) -> None:
+        """Keep only the lanes ``indices``."""
         for name in self.fields:
-            old = getattr(self, name)
-            setattr(self, name, np.empty(old.shape[:-1] + (len(indices),), old.dtype) if name in stale
-                    else np.take(old, indices, axis=-1))
+            setattr(self, name, np.take(getattr(self, name), indices, axis=-1))
 
     def split(self, indices: np.ndarray) -> "Lanes":
         """Remove the lanes ``indices`` (increasing) and return them as lanes of their own."""

@@ -23,7 +23,7 @@ import numpy as np
 
 from .. import warp
 from ..spectra import Colour, ColourTable, check_emission
-from ..vecmath import dot, leave_distance
+from ..vecmath import dot
 from ..warp import square_to_uniform_triangle
 from .base import EmissionSample, Light, LightContext, LightSample
 from .spherical_triangle import sample_spherical_triangle, solid_angle
@@ -102,7 +102,7 @@ class AreaLight(Light):
         u_side = np.where(two, (u[2] * 2) % 1.0, u[2])  # reused after choosing a side
         d = warp.square_to_cosine_about(n * side, np.stack((u_side, u[3])))
         cos = np.abs(dot(n, d)).astype(np.float64)
-        return EmissionSample(point=p, tmin=leave_distance(rows[12], dot(n, d)), epsilon=rows[12], normal=n,
+        return EmissionSample(point=p, epsilon=rows[12], normal=n,
                               direction=d, value=tables.radiance_of(idx, colours),
                               pdf_pos=1.0 / tables.area.take(idx), pdf_dir=cos * warp.INV_PI * np.where(two, 0.5, 1.0),
                               cos_light=cos)
@@ -172,10 +172,11 @@ class AreaTables:
         wi = point - receivers
         dist2 = dot(wi, wi)
         distance = np.sqrt(dist2)
-        wi /= distance
+        wi = np.divide(wi, distance, out=np.zeros_like(wi), where=distance > 0)  # a receiver on the light: no sample
         cos_light = -dot(normal, wi)
         with np.errstate(divide="ignore", invalid="ignore"):
             pdf = dist2.astype(np.float64) / (self.area.take(emitter) * np.abs(cos_light).astype(np.float64))
+        pdf = np.where(distance > 0, pdf, 0.0)
         if measure == "solid_angle":
             with np.errstate(divide="ignore"):
                 pdf = np.where(_spherical(omega), 1.0 / omega, pdf)
@@ -201,9 +202,10 @@ class AreaTables:
         rows = np.take(self.table, emitter, axis=1)
         to_point = points - receivers
         dist2 = dot(to_point, to_point).astype(np.float64)
-        cos_light = np.abs(dot(rows[9:12], to_point)).astype(np.float64) / np.sqrt(dist2)
         with np.errstate(divide="ignore", invalid="ignore"):
-            pdf = dist2 / (self.area.take(emitter) * cos_light)
+            cos_light = np.abs(dot(rows[9:12], to_point)).astype(np.float64) / np.sqrt(dist2)
+            # a point on the receiver itself (closer than float32 tells apart): no light sample lands there
+            pdf = np.where(dist2 > 0, dist2 / (self.area.take(emitter) * cos_light), 0.0)
         if measure == "solid_angle":
             p0 = rows[0:3].astype(np.float64)
             omega = solid_angle(p0, p0 + rows[3:6], p0 + rows[6:9], receivers.astype(np.float64))

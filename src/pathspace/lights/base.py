@@ -61,7 +61,7 @@ class LightSample:
     (N,) float64 solid-angle density (with the selection pmf once the
     LightSet has chosen the light; for delta lights the pmf alone);
     ``delta`` (N,); ``cos_light`` (N,) float32 dot(normal, -wi) for area
-    lights, 1 otherwise; ``epsilon`` (N,) float32 ray offset of the light's
+    lights, 1 otherwise; ``epsilon`` (N,) float32 error bound of the light's
     surface (area lights; else 0); ``entity`` (N,) int64 the sampled light
     (set by the LightSet).
     """
@@ -89,16 +89,15 @@ class EmissionSample:
     on the disk the rays start from.  ``pdf_dir``: solid-angle density of the
     direction (1 for a directional light's delta direction).  ``value``:
     radiance (area, environment), intensity (point, spot) or irradiance
-    (directional) carried by the ray.  The ray starts at ``point``, ``tmin``
-    along ``direction`` (see :func:`pathspace.vecmath.leave_distance`;
-    ``epsilon``: the ray offset of an area light's surface, else 0); for
+    (directional) carried by the ray.  The ray leaves ``point`` along
+    ``direction`` (moved off an area light's surface by its error bound
+    ``epsilon``, see :func:`pathspace.vecmath.offset_origin`; else 0); for
     lights at infinity ``point`` lies on a disk outside the scene and
     ``normal`` is the direction; point and spot lights have a zero
     ``normal``.  ``cos_light``: |cos| at the origin (area lights), else 1.
     """
 
     point: np.ndarray
-    tmin: np.ndarray
     epsilon: np.ndarray
     normal: np.ndarray
     direction: np.ndarray
@@ -134,6 +133,11 @@ class Light:
     def pdf_li(tables, idx: np.ndarray, receivers: np.ndarray, points: np.ndarray, measure: str) -> np.ndarray:
         """Lights no ray can hit have no density of being found."""
         return np.zeros(idx.size)
+
+    def translated(self, offset: np.ndarray) -> "Light":
+        """The light with every position moved by ``offset`` (3,) (into the scene's render space); lights
+        without a position of their own (area lights live on the mesh, lights at infinity) are unchanged."""
+        return self
 
 
 def disk_origins(context: LightContext, d: np.ndarray, u: np.ndarray) -> np.ndarray:

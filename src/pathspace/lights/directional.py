@@ -40,7 +40,7 @@ class DirectionalLight(Light):
     @classmethod
     def from_fields(cls, fields: "Fields") -> "DirectionalLight":
         """A ``[[lights]]`` table of type "directional": ``direction``, ``irradiance``."""
-        direction, irradiance = tuple(fields.vector("direction", 3)), fields.colour("irradiance")
+        direction, irradiance = tuple(fields.direction("direction")), fields.colour("irradiance")
         fields.finish()
         return fields.build(lambda: cls(direction, irradiance))
 
@@ -77,7 +77,7 @@ class DirectionalLight(Light):
         count = idx.size
         d = tables.travel.take(idx, axis=1).astype(np.float32)
         return EmissionSample(point=disk_origins(context, d, u[2:4]).astype(np.float32),
-                              tmin=np.zeros(count, np.float32), epsilon=np.zeros(count, np.float32), normal=d,
+                              epsilon=np.zeros(count, np.float32), normal=d,
                               direction=d, value=colours.lookup(tables.irradiance, idx),
                               pdf_pos=np.full(count, 1.0 / (np.pi * context.disk_radius ** 2)), pdf_dir=np.ones(count),
                               cos_light=np.ones(count))

@@ -75,7 +75,7 @@ class Environment(Light):
         count = idx.size
         d = warp.square_to_uniform_sphere(u[0:2])
         return EmissionSample(point=disk_origins(context, d, u[2:4]).astype(np.float32),
-                              tmin=np.zeros(count, np.float32), epsilon=np.zeros(count, np.float32), normal=d,
+                              epsilon=np.zeros(count, np.float32), normal=d,
                               direction=d, value=colours.lookup(tables, idx),
                               pdf_pos=np.full(count, 1.0 / (np.pi * context.disk_radius ** 2)),
                               pdf_dir=np.full(count, warp.INV_FOUR_PI), cos_light=np.ones(count))

@@ -7,7 +7,7 @@ sphere of directions.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -37,10 +37,14 @@ class PointLight(Light):
         triple(self.position, "position")
         object.__setattr__(self, "intensity", check_emission(self.intensity, "intensity"))
 
+    def translated(self, offset: np.ndarray) -> "PointLight":
+        """The light moved by ``offset`` (3,) (into the scene's render space)."""
+        return replace(self, position=tuple(np.add(self.position, offset).tolist()))
+
     @classmethod
     def from_fields(cls, fields: "Fields") -> "PointLight":
         """A ``[[lights]]`` table of type "point": ``position``, ``intensity``."""
-        position, intensity = tuple(fields.vector("position", 3)), fields.colour("intensity")
+        position, intensity = tuple(fields.point("position")), fields.colour("intensity")
         fields.finish()
         return fields.build(lambda: cls(position, intensity))
 
@@ -65,7 +69,6 @@ class PointLight(Light):
         """Uniform directions from the light's position."""
         d = warp.square_to_uniform_sphere(u[0:2])
         return EmissionSample(point=tables.position.take(idx, axis=1).astype(np.float32),
-                              tmin=np.zeros(idx.size, np.float32),
                               epsilon=np.zeros(idx.size, np.float32), normal=np.zeros((3, idx.size), np.float32),
                               direction=d, value=colours.lookup(tables.intensity, idx),
                               pdf_pos=np.ones(idx.size), pdf_dir=np.full(idx.size, warp.INV_FOUR_PI),

@@ -7,7 +7,7 @@ rays are uniform within the cone.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -46,11 +46,15 @@ class SpotLight(Light):
             raise ValueError(f"cone_angle, falloff_start: expected 0 < falloff_start <= cone_angle <= 90 degrees, "
                              f"got {self.falloff_start}, {self.cone_angle}")
 
+    def translated(self, offset: np.ndarray) -> "SpotLight":
+        """The light moved by ``offset`` (3,) (into the scene's render space)."""
+        return replace(self, position=tuple(np.add(self.position, offset).tolist()), look_at=tuple(np.add(self.look_at, offset).tolist()))
+
     @classmethod
     def from_fields(cls, fields: "Fields") -> "SpotLight":
         """A ``[[lights]]`` table of type "spot": ``position``, ``look_at``, ``intensity``, ``cone_angle``
         (default 30), ``falloff_start`` (default 25, at most the cone angle)."""
-        position, look_at = tuple(fields.vector("position", 3)), tuple(fields.vector("look_at", 3))
+        position, look_at = tuple(fields.point("position")), tuple(fields.point("look_at"))
         intensity = fields.colour("intensity")
         cone = fields.number("cone_angle", 30.0, low=0.0, high=90.0, low_open=True)
         start = fields.number("falloff_start", min(25.0, cone), low=0.0, high=cone)
@@ -104,7 +108,7 @@ class SpotLight(Light):
         s, t = orthonormal_basis(axis)
         d = (s * (sin_theta * np.cos(phi)) + t * (sin_theta * np.sin(phi)) + axis * cos_theta).astype(np.float32)
         count = idx.size
-        return EmissionSample(point=tables.position.take(idx, axis=1).astype(np.float32), tmin=np.zeros(count, np.float32),
+        return EmissionSample(point=tables.position.take(idx, axis=1).astype(np.float32),
                               epsilon=np.zeros(count, np.float32), normal=np.zeros((3, count), np.float32), direction=d,
                               value=colours.lookup(tables.intensity, idx) * tables.falloff(idx, d.astype(np.float64)),
                               pdf_pos=np.ones(count), pdf_dir=tables.cone_density(idx), cos_light=np.ones(count))

@@ -9,18 +9,22 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["TriangleMesh", "triangle_cross", "RAY_OFFSET_RELATIVE"]
+from ..vecmath import gamma
 
-# Rays leave a surface point p along the line through p but start a distance
-# epsilon / |cos| from it (epsilon measured along the normal), so they cannot
-# re-hit the surface they leave; segments between two surface points end the
-# same way short of their far point.  epsilon is this fraction of the largest
-# coordinate magnitude of the triangle's vertices: float32 hit points and
-# Embree's intersection distances are accurate to a few units in the last
-# place of that magnitude (2**-24 relative), and 2**-18 leaves a 64-fold
-# margin.  Being relative to each triangle, it keeps renders invariant under
-# scaling and is unaffected by geometry far away.
-RAY_OFFSET_RELATIVE = 2.0 ** -18
+__all__ = ["TriangleMesh", "triangle_cross", "HIT_POINT_ROUNDINGS"]
+
+# A hit point p = p0 + b1 e1 + b2 e2 is reconstructed in float32 from the barycentrics Embree reports
+# (pbrt-v4, sec. 6.8.5): the barycentrics only move p within the triangle's plane, and the arithmetic
+# -- p0, e1, e2 rounded to float32, two products and two sums, plus the rounding of the vertices Embree
+# traces -- leaves p within gamma(7) (|p0| + |e1| + |e2|) of that plane, per coordinate.  Along the unit
+# normal n that is epsilon = gamma(7) sum_c |n_c| (|p0_c| + |e1_c| + |e2_c|), the ray offset of the
+# triangle (see :func:`pathspace.vecmath.offset_origin`).  It bounds Embree's own error in the sign of a
+# leaving ray's distance to the plane too (its terms are (v_i - origin) . n, each within the same sums).
+# Coordinates are relative to the scene's render origin (see :class:`pathspace.scene.Scene`), so the
+# bound is small wherever the scene sits in the world.
+HIT_POINT_ROUNDINGS = 7
+# The least offset, relative to the triangle's coordinates (far below any rounding, far above underflow).
+EXACT_PLANE_OFFSET = 2.0 ** -40
 
 
 def triangle_cross(vertices: np.ndarray, indices: np.ndarray) -> np.ndarray:
@@ -43,8 +47,8 @@ class TriangleMesh:
     material : (F,) int32, index into the scene's material table
     shape : (F,) int32, index into the scene's shape list
     table : (13, F) float32, rows p0 (first vertex), e1 = p1 - p0, e2 = p2 - p0,
-        the unit geometric normal (right-hand rule) and the ray offset epsilon
-        (see RAY_OFFSET_RELATIVE)
+        the unit geometric normal (right-hand rule) and the ray offset epsilon, a bound on the error of
+        reconstructed hit points along the normal (see HIT_POINT_ROUNDINGS)
     normal : (3, F) float32, a view of the normal rows
     area : (F,) float64
     """
@@ -60,12 +64,16 @@ class TriangleMesh:
         n = triangle_cross(self.vertices, self.indices)
         double_area = np.linalg.norm(n, axis=1)
         self.area = 0.5 * double_area
-        magnitude = np.maximum(np.abs(p).max(axis=(1, 2)), np.finfo(np.float32).tiny)
         # Rows 0-2: p0, 3-5: e1 = p1 - p0, 6-8: e2 = p2 - p0, 9-11: unit normal, 12: ray
         # offset; one gather of this table gives everything a hit needs.
-        self.table = np.ascontiguousarray(np.concatenate(
-            [p[:, 0], e1, e2, n / double_area[:, None], RAY_OFFSET_RELATIVE * magnitude[:, None]], axis=1).T,
-            dtype=np.float32)
+        table = np.concatenate([p[:, 0], e1, e2, n / double_area[:, None]], axis=1).astype(np.float32).T
+        stored = table.astype(np.float64)
+        spread = np.abs(stored[0:3]) + np.abs(stored[3:6]) + np.abs(stored[6:9])
+        epsilon = gamma(HIT_POINT_ROUNDINGS) * np.sum(np.abs(stored[9:12]) * spread, axis=0)
+        # A plane through the render origin along an axis is exact (a zero bound): stand off it a little
+        # anyway, or Embree would find the surface again at t = 0.
+        epsilon = np.maximum(epsilon, EXACT_PLANE_OFFSET * spread.max(axis=0))
+        self.table = np.ascontiguousarray(np.vstack([table, epsilon[None].astype(np.float32)]))
         self.normal = self.table[9:12]
 
     @property

@@ -1,7 +1,7 @@
 """The scene model, independent of any file format."""
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
@@ -29,6 +29,11 @@ class Scene:
     source : the file it was loaded from, if any
     render_spp : the samples per pixel its ``[render]`` table asks for (None: the renderer's default)
     fingerprint : a hash of its description and every file it loads (see ``toml_loader.fingerprint``)
+    origin : (3,) float64, the world point at the origin of *render space*.  Every position the scene
+        holds (mesh vertices, camera, lights) is in render space, world minus ``origin``: geometry is
+        traced in float32, whose precision is relative to the magnitude of coordinates, so it is
+        re-centred (on the camera by default, like pbrt-v4's camera-world space) before it is rounded.
+        Images do not depend on it; add it back to get world positions (:meth:`to_world`).
     """
 
     camera: PinholeCamera
@@ -39,6 +44,7 @@ class Scene:
     source: str | None = None
     render_spp: int | None = None
     fingerprint: str = ""
+    origin: np.ndarray = field(default_factory=lambda: np.zeros(3))
 
     @cached_property
     def accel(self) -> Accel:
@@ -51,17 +57,22 @@ class Scene:
         triangles = self.mesh.indices[self.lights.area.triangles]
         return Accel(self.mesh.vertices.astype(np.float32), np.ascontiguousarray(triangles))
 
+    def to_world(self, points: np.ndarray) -> np.ndarray:
+        """World positions (float64) of render-space ``points`` (..., 3)."""
+        return np.asarray(points, dtype=np.float64) + self.origin
+
     def spectral_reasons(self) -> list[str]:
         """Why this scene needs spectral rendering (empty: RGB suffices)."""
         return self.materials.spectral_reasons() + self.lights.spectral_reasons()
 
     def describe(self) -> str:
         """A short human-readable summary."""
-        lo, hi = self.mesh.bounds()
+        lo, hi = (self.to_world(corner) for corner in self.mesh.bounds())
         return "\n".join([
             f"scene {self.source or '(in memory)'}",
             f"  {self.mesh.triangle_count} triangles in {len(self.shape_names)} shapes, "
-            f"bounds {np.round(lo, 4).tolist()} .. {np.round(hi, 4).tolist()}",
+            f"bounds {np.round(lo, 4).tolist()} .. {np.round(hi, 4).tolist()} (world; rendered relative to "
+            f"{np.round(self.origin, 4).tolist()})",
             f"  {len(self.materials)} materials: {', '.join(self.materials.names)}",
             f"  {self.lights!r}",
             f"  {self.camera!r}",

@@ -14,11 +14,14 @@ import numpy as np
 import trimesh
 
 from ..fields import Fields
+from ..vecmath import orthonormal_basis
 
-__all__ = ["SHAPES", "MAX_SUBDIVISIONS", "quad", "box", "sphere", "transform_matrix"]
+__all__ = ["SHAPES", "MAX_SUBDIVISIONS", "MAX_SEGMENTS", "quad", "box", "sphere", "disk", "transform_matrix"]
 
 # An icosphere of 8 subdivisions has 1.3 million triangles; beyond that memory runs out quickly.
 MAX_SUBDIVISIONS = 8
+# A disk of 2^20 segments has a million triangles.
+MAX_SEGMENTS = 2 ** 20
 
 
 def quad(corner: np.ndarray, edge_u: np.ndarray, edge_v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -37,6 +40,18 @@ def sphere(center: np.ndarray, radius: float, subdivisions: int) -> tuple[np.nda
     """Icosphere (20 * 4**subdivisions triangles, vertices on the sphere, outward normals)."""
     mesh = trimesh.creation.icosphere(subdivisions=subdivisions, radius=radius)
     return np.asarray(mesh.vertices, dtype=np.float64) + center, np.asarray(mesh.faces, dtype=np.int64)
+
+
+def disk(center: np.ndarray, normal: np.ndarray, radius: float, segments: int) -> tuple[np.ndarray, np.ndarray]:
+    """Regular polygon of ``segments`` sides inscribed in the circle of ``radius`` about ``center``, in the
+    plane normal to ``normal``: a fan of triangles around the centre, their normals along ``normal``."""
+    n = np.asarray(normal, dtype=np.float64) / np.linalg.norm(normal)
+    s, t = (axis[:, 0] for axis in orthonormal_basis(n[:, None]))  # s x t = n: counter-clockwise about n
+    phi = 2.0 * np.pi * np.arange(segments) / segments
+    rim = center + radius * (np.cos(phi)[:, None] * s + np.sin(phi)[:, None] * t)
+    k = np.arange(segments)
+    faces = np.stack((np.zeros(segments, dtype=np.int64), 1 + k, 1 + (k + 1) % segments), axis=1)
+    return np.vstack((np.asarray(center, dtype=np.float64)[None], rim)), faces
 
 
 def transform_matrix(scale: np.ndarray, axis: np.ndarray, angle_deg: float, translate: np.ndarray) -> np.ndarray:
@@ -68,6 +83,8 @@ def _mesh(shape: Fields) -> tuple[np.ndarray, np.ndarray]:
     f = np.asarray(getattr(mesh, "faces", np.zeros((0, 3))), dtype=np.int64)
     if f.size == 0:
         raise shape.error(f"mesh file {path} contains no triangles", "file")
+    if v.ndim != 2 or v.shape[1] != 3:
+        raise shape.error(f"mesh file {path} has vertices of shape {v.shape}, expected 3 coordinates each", "file")
     if not np.all(np.isfinite(v)):
         raise shape.error(f"mesh file {path} has non-finite vertex coordinates", "file")
     if f.ndim != 2 or f.shape[1] != 3 or f.min() < 0 or f.max() >= len(v):
@@ -94,5 +111,13 @@ def _sphere(shape: Fields) -> tuple[np.ndarray, np.ndarray]:
                   shape.integer("subdivisions", 3, low=0, high=MAX_SUBDIVISIONS))
 
 
+def _disk(shape: Fields) -> tuple[np.ndarray, np.ndarray]:
+    """``center`` (default the origin), ``normal`` (default +z), ``radius``, ``segments`` of the polygon
+    (default 64)."""
+    normal = shape.direction("normal", [0.0, 0.0, 1.0])
+    return disk(shape.vector("center", 3, [0.0, 0.0, 0.0]), normal, shape.number("radius", low=0.0, low_open=True),
+                shape.integer("segments", 64, low=3, high=MAX_SEGMENTS))
+
+
 SHAPES: dict[str, Callable[[Fields], tuple[np.ndarray, np.ndarray]]] = {
-    "triangles": _triangles, "mesh": _mesh, "quad": _quad, "box": _box, "sphere": _sphere}
+    "triangles": _triangles, "mesh": _mesh, "quad": _quad, "box": _box, "sphere": _sphere, "disk": _disk}

@@ -1,0 +1,119 @@
+"""Ray offsets from floating-point error bounds (pbrt-v4, sec. 6.8): rays leaving a surface never hit it
+again, shadow rays between two mutually visible surface points are never blocked by the surfaces they
+join, and surfaces a few float32 roundings apart are still told apart -- at any orientation, any
+triangle size, any distance from the render origin and any angle, grazing included."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from pathspace import Accel
+from pathspace.estimators.visibility import segment_blocked
+from pathspace.scene.mesh import TriangleMesh
+from pathspace.vecmath import dot, offset_origin
+
+
+def random_rotations(rng, n):
+    q = rng.normal(size=(n, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    w, x, y, z = q.T
+    return np.stack([
+        np.stack([1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)], -1),
+        np.stack([2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)], -1),
+        np.stack([2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)], -1)], 1)
+
+
+def triangles_in_cells(rng, count, distance, size):
+    """``count`` random triangles (random shape and orientation, edges ~``size``), each alone in a cell of a
+    grid whose centre lies ``distance`` from the origin along a random direction: (TriangleMesh, cell size)."""
+    cell = 8.0 * size
+    grid = np.stack(np.unravel_index(np.arange(count), (int(np.ceil(count ** (1 / 3))),) * 3), -1) * cell
+    centre = rng.normal(size=3)
+    centre *= distance / np.linalg.norm(centre)
+    local = rng.uniform(-size, size, (count, 3, 3))
+    local[:, :, 2] *= rng.choice([0.0, 1.0], size=(count, 1))  # half of them axis-aligned in their frame
+    rotate = np.where(rng.uniform(size=(count, 1, 1)) < 0.5, random_rotations(rng, count), np.eye(3))
+    vertices = (np.einsum("fij,fvj->fvi", rotate, local) + (grid + centre)[:, None, :]).reshape(-1, 3)
+    mesh = TriangleMesh(vertices, np.arange(3 * count).reshape(-1, 3), np.zeros(count), np.zeros(count))
+    return mesh, cell
+
+
+def hit_points(rng, mesh, prim):
+    u = rng.uniform(size=(2, prim.size)).astype(np.float32)
+    b1, b2 = np.where(u.sum(0) > 1, 1 - u, u)
+    return mesh.hit_geometry(prim, b1, b2)
+
+
+def directions_at(rng, normal, cos):
+    """Unit directions at cosine ``cos`` (signed) to ``normal``, random azimuth."""
+    tangent = np.cross(normal.T, rng.normal(size=normal.T.shape)).T
+    tangent /= np.linalg.norm(tangent, axis=0)
+    sin = np.sqrt(1 - cos * cos)
+    return (normal * cos + tangent * sin).astype(np.float32)
+
+
+@pytest.mark.parametrize("distance", [0.0, 1e2, 1e4])
+@pytest.mark.parametrize("size", [1e-3, 1.0, 1e3])
+def test_rays_leaving_a_surface_never_hit_it_again(distance, size):
+    rng = np.random.default_rng(7)
+    mesh, _ = triangles_in_cells(rng, 512, distance * size, size)
+    accel = Accel(mesh.vertices.astype(np.float32), mesh.indices)
+    n = 40_000
+    prim = rng.integers(0, mesh.triangle_count, n)
+    p, normal, eps = hit_points(rng, mesh, prim)
+    # grazing to normal incidence, on both sides: |cos| log-uniform in [1e-6, 1]
+    cos = np.exp(rng.uniform(np.log(1e-6), 0.0, n)) * rng.choice([-1.0, 1.0], n)
+    w = directions_at(rng, normal.astype(np.float64), cos)
+    hits = accel.intersect(offset_origin(p, normal, eps, w), w, normals=False)
+    assert not np.any(hits.prim == prim), f"{np.count_nonzero(hits.prim == prim)} self-intersections of {n}"
+
+
+@pytest.mark.parametrize("distance", [0.0, 1e2, 1e4])
+def test_shadow_rays_between_visible_points_are_never_blocked_by_their_ends(distance):
+    """Two triangles in a cell: any point of one sees any point of the other, unless one point lies
+    within the other triangle's error bound of its plane (then the geometry is not resolved in float32:
+    such pairs are left out)."""
+    rng = np.random.default_rng(11)
+    mesh, _ = triangles_in_cells(rng, 1024, distance, 1.0)
+    pairs = mesh.triangle_count // 2
+    first, second = 2 * np.arange(pairs), 2 * np.arange(pairs) + 1
+    # move each odd triangle into its even neighbour's cell, 0.01 .. 2 away along a random direction
+    shift = mesh.table[0:3, first].astype(np.float64) - mesh.table[0:3, second]
+    offset = rng.normal(size=(3, pairs))
+    offset *= np.exp(rng.uniform(np.log(0.01), np.log(2.0), pairs)) / np.linalg.norm(offset, axis=0)
+    vertices = mesh.vertices.copy().reshape(-1, 3, 3)
+    vertices[1::2] += (shift + offset).T[:, None, :]
+    mesh = TriangleMesh(vertices.reshape(-1, 3), mesh.indices, mesh.material, mesh.shape)
+    scene = SimpleNamespace(accel=Accel(mesh.vertices.astype(np.float32), mesh.indices))
+    k = np.repeat(np.arange(pairs), 40)
+    a, n_a, eps_a = hit_points(rng, mesh, first[k])
+    b, n_b, eps_b = hit_points(rng, mesh, second[k])
+    apart = ((np.abs(dot(a - mesh.table[0:3, second[k]], n_b)) > 4 * eps_b)
+             & (np.abs(dot(b - mesh.table[0:3, first[k]], n_a)) > 4 * eps_a))
+    a, n_a, eps_a, b, n_b, eps_b = (x[..., apart] for x in (a, n_a, eps_a, b, n_b, eps_b))
+    blocked = segment_blocked(scene, a, eps_a, n_a, b, eps_b, n_b)
+    assert blocked.size > 10_000 and not blocked.any(), f"{np.count_nonzero(blocked)} of {blocked.size} blocked"
+    # and in the other direction
+    assert not segment_blocked(scene, b, eps_b, n_b, a, eps_a, n_a).any()
+
+
+@pytest.mark.parametrize("gap", [1e-6, 1e-5])
+def test_a_surface_a_millionth_in_front_of_a_point_blocks_it(gap):
+    """Shadow rays toward points on a quad are blocked by a parallel quad ``gap`` in front of it (scene of
+    size 1 around the render origin), from every angle down to a cosine of 0.01."""
+    rng = np.random.default_rng(3)
+    quad = [[-0.5, 0.0, -0.5], [0.5, 0.0, -0.5], [0.5, 0.0, 0.5], [-0.5, 0.0, 0.5]]
+    blocker = np.array(quad) * 2 + [0.0, gap, 0.0]
+    vertices = np.concatenate([quad, blocker])
+    faces = np.array([[0, 2, 1], [0, 3, 2], [4, 6, 5], [4, 7, 6]])  # both facing +y
+    mesh = TriangleMesh(vertices, faces, np.zeros(4), np.zeros(4))
+    scene = SimpleNamespace(accel=Accel(mesh.vertices.astype(np.float32), mesh.indices))
+    n = 20_000
+    b, n_b, eps_b = hit_points(rng, mesh, rng.integers(0, 2, n))
+    cos = np.exp(rng.uniform(np.log(0.01), 0.0, n))
+    a = (b + directions_at(rng, n_b.astype(np.float64), cos) * rng.uniform(0.05, 1.0, n)).astype(np.float32)
+    blocked = segment_blocked(scene, a, np.zeros(n, np.float32), np.zeros((3, n), np.float32), b, eps_b, n_b)
+    assert blocked.all(), f"{np.count_nonzero(~blocked)} of {n} leak through a surface {gap:g} in front"
+    assert np.all(eps_b < gap)
