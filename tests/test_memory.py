@@ -3,6 +3,7 @@ message naming the setting to change; the estimate of the film is its actual siz
 from __future__ import annotations
 
 import time
+import tracemalloc
 
 import numpy as np
 import pytest
@@ -16,8 +17,13 @@ from conftest import CORNELL, scene_dict
 def test_a_huge_resolution_is_refused_before_allocating():
     scene = ps.scene_from_dict(scene_dict("cornell-box", (100_000, 100_000)))
     start = time.perf_counter()
-    with pytest.raises(RenderMemoryError) as refused:
-        ps.render(scene, "pt", spp=1)
+    tracemalloc.start()
+    try:
+        with pytest.raises(RenderMemoryError) as refused:
+            ps.render(scene, "pt", spp=1)
+        assert tracemalloc.get_traced_memory()[1] < 50 << 20
+    finally:
+        tracemalloc.stop()
     assert time.perf_counter() - start < 2.0
     message = str(refused.value)
     assert message.startswith("rendering 100000x100000 with pt needs ~")
@@ -69,7 +75,8 @@ def test_the_estimate_of_the_film_is_its_size(estimator, spectral, params):
         return sum(a.nbytes for a in (moments.count, moments.exponent, moments.scaled_mean, moments.scaled_m2))
 
     assert needs["film"] == size(film.moments)
-    assert needs["layers"] == sum(size(layer) for layer in film.layers.values()) and (needs["layers"] > 0) == bool(params)
+    assert needs["layers"] == sum(size(layer) for layer in film.layers.values())
+    assert (needs["layers"] > 0) == bool(params)
     images = result.image.nbytes + result.variance.nbytes + (result.xyz.nbytes if spectral else 0)
     assert needs["images"] == images
     assert estimate_render_memory(scene, ps.estimators.make_estimator(estimator, **params), film.covariance, 2,
