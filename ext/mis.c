@@ -88,6 +88,7 @@ typedef struct {
     int target_s, target_t;
     const uint8_t *allowed;  /* NULL: every strategy takes part */
     int allowed_size;
+    npy_intp allowed_stride[2];  /* in bytes (= entries): the table is read in place, never copied */
     double *out;
 } MisBatch;
 
@@ -95,7 +96,8 @@ static inline int takes_part(const MisBatch *b, int s, int t)
 {
     if (b->allowed == NULL)
         return 1;
-    return s < b->allowed_size && t < b->allowed_size && b->allowed[(npy_intp)s * b->allowed_size + t];
+    return s < b->allowed_size && t < b->allowed_size &&
+           b->allowed[(npy_intp)s * b->allowed_stride[0] + (npy_intp)t * b->allowed_stride[1]];
 }
 
 /* The heuristic's term for a strategy whose probability is r times the current one's. */
@@ -217,7 +219,8 @@ PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs)
     PyArrayObject *allowed = NULL;
     PyObject *result = NULL;
     if (allowed_obj != Py_None) {
-        allowed = (PyArrayObject *)PyArray_FROMANY(allowed_obj, NPY_UINT8, 2, 2, NPY_ARRAY_C_CONTIGUOUS | NPY_ARRAY_ALIGNED);
+        /* Any strides (a uint8 array is used as it is), so the size is checked before anything is copied. */
+        allowed = (PyArrayObject *)PyArray_FROMANY(allowed_obj, NPY_UINT8, 2, 2, 0);
         if (allowed == NULL || PyArray_DIM(allowed, 0) != PyArray_DIM(allowed, 1) || PyArray_DIM(allowed, 0) > 1 << 20) {
             PyErr_Clear();
             PyErr_SetString(PyExc_ValueError, "mis_weights: allowed must be a square (size, size) array of flags");
@@ -289,6 +292,7 @@ PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs)
         (const double *)PyArray_DATA(a[16]), (const double *)PyArray_DATA(a[17]),
         camera_is_delta, heuristic, beta, target_s, target_t,
         allowed ? (const uint8_t *)PyArray_DATA(allowed) : NULL, allowed ? (int)PyArray_DIM(allowed, 0) : 0,
+        {allowed ? PyArray_STRIDE(allowed, 0) : 0, allowed ? PyArray_STRIDE(allowed, 1) : 0},
         (double *)PyArray_DATA((PyArrayObject *)result),
     };
     Py_BEGIN_ALLOW_THREADS

@@ -16,7 +16,7 @@ from pathspace import metrics
 from pathspace.cli import main
 from pathspace.estimators import ESTIMATORS
 from pathspace.imageio import read_exr
-from conftest import ROOT
+from conftest import CORNELL, ROOT
 
 
 def run_cli(*args, cwd=None):
@@ -24,10 +24,15 @@ def run_cli(*args, cwd=None):
                           cwd=cwd)
 
 
+def cornell_file(folder, width: int, height: int):
+    """The Cornell box scene file at ``width`` x ``height``, written to ``folder/scene.toml``."""
+    scene = folder / "scene.toml"
+    scene.write_text(CORNELL.read_text().replace("resolution = [256, 256]", f"resolution = [{width}, {height}]"))
+    return scene
+
+
 def test_render_and_compare(tmp_path):
-    scene = tmp_path / "scene.toml"
-    text = (ROOT / "scenes" / "cornell-box" / "scene.toml").read_text()
-    scene.write_text(text.replace("resolution = [256, 256]", "resolution = [32, 32]"))
+    scene = cornell_file(tmp_path, 32, 32)
 
     out = tmp_path / "out" / "a.exr"
     done = run_cli("render", scene, "--spp", 4, "--seed", 3, "-o", out, "-q", "-p", "max_depth=3")
@@ -53,9 +58,7 @@ def test_render_and_compare(tmp_path):
 
 def test_bdpt_pyramid_from_the_command_line(tmp_path):
     """-p pyramid=K writes every strategy's images as EXR layers and two labelled contact sheets."""
-    scene = tmp_path / "scene.toml"
-    text = (ROOT / "scenes" / "cornell-box" / "scene.toml").read_text()
-    scene.write_text(text.replace("resolution = [256, 256]", "resolution = [24, 16]"))
+    scene = cornell_file(tmp_path, 24, 16)
     out = tmp_path / "bd.exr"
     done = run_cli("render", scene, "-e", "bdpt", "--spp", 4, "-o", out, "-q", "-p", "pyramid=2", "-p",
                    "strategy=[1,2]", "-p", "mis=single")
@@ -87,7 +90,7 @@ def test_cli_errors_are_one_line(tmp_path):
 
 
 def test_info_prints_the_plan():
-    done = run_cli("info", ROOT / "scenes" / "cornell-box" / "scene.toml")
+    done = run_cli("info", CORNELL)
     assert done.returncode == 0
     assert "36 triangles" in done.stdout and "plan: next-event estimation + BSDF sampling" in done.stdout
 
@@ -133,7 +136,7 @@ def test_unwritable_outputs_fail_before_any_work(tmp_path, capsys):
     blocker = tmp_path / "blocker"
     blocker.write_text("a file where a folder should be")
     bad = blocker / "out"
-    scene = ROOT / "scenes" / "cornell-box" / "scene.toml"
+    scene = CORNELL
     commands = {"render": ("render", scene, "--spp", 100000, "-o", f"{bad}.exr"),
                 "reference": ("reference", scene, "--spp", 100000, "--cache", bad),
                 "converge": ("converge", scene, "-e", "pt,bdpt", "--spp", 100000, "--reference", tmp_path / "r.exr",
@@ -152,7 +155,7 @@ def test_unwritable_outputs_fail_before_any_work(tmp_path, capsys):
 
 
 def test_unknown_parameters_list_the_valid_keys(tmp_path, capsys):
-    scene = ROOT / "scenes" / "cornell-box" / "scene.toml"
+    scene = CORNELL
     keys = ", ".join(key for key, _, _ in ESTIMATORS["bdpt"].parameters())
     for command, args in (("render", ("render", scene, "-e", "bdpt", "--spp", 100000, "-o", tmp_path / "x.exr")),
                           ("info", ("info", scene, "-e", "bdpt")),
@@ -170,9 +173,7 @@ def test_unknown_parameters_list_the_valid_keys(tmp_path, capsys):
 def test_state_files_on_the_command_line(tmp_path, capsys):
     """--resume without a state starts afresh and says so; a state is never overwritten without --resume,
     nor resumed by a different render."""
-    scene = tmp_path / "scene.toml"
-    text = (ROOT / "scenes" / "cornell-box" / "scene.toml").read_text()
-    scene.write_text(text.replace("resolution = [256, 256]", "resolution = [16, 16]"))
+    scene = cornell_file(tmp_path, 16, 16)
     out = tmp_path / "out.exr"
     done = run_main(capsys, "render", scene, "--spp", 2, "-o", out, "-q", "--no-png", "--resume")
     assert done.returncode == 0, done.stderr

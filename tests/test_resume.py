@@ -9,6 +9,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -65,22 +66,21 @@ def cli(*args) -> list[str]:
     return [sys.executable, "-m", "pathspace.cli", *map(str, args)]
 
 
-def start_render(scene_file, name, out, *extra) -> subprocess.Popen:
-    """``pathspace render`` of a case in the background, saving its state every 20 ms."""
+def start_render(scene_file, name, tmp_path, timeout: float = 60.0) -> tuple[Path, Path, subprocess.Popen]:
+    """``pathspace render`` of a case to ``tmp_path/out.exr`` in the background, saving its state every 20 ms;
+    returns (out, state, process) once the state has been saved."""
     _, spp, params = CASES[name]
+    out, state = tmp_path / "out.exr", tmp_path / "out.exr.state"
     options = [x for key, value in params.items() for x in ("-p", f"{key}={value}")]
-    return subprocess.Popen(cli("render", scene_file, "-e", name, "--spp", spp, "--seed", SEED, "-o", out, "-q",
-                                "--no-png", "--save-every", 0.02, *options, *extra),
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-
-
-def wait_for(path, process: subprocess.Popen, timeout: float = 60.0) -> None:
-    """Wait until ``path`` exists (the render saved its state once) while ``process`` runs."""
+    process = subprocess.Popen(cli("render", scene_file, "-e", name, "--spp", spp, "--seed", SEED, "-o", out, "-q",
+                                   "--no-png", "--save-every", 0.02, *options),
+                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.monotonic() + timeout
-    while not path.exists():
+    while not state.exists():
         assert process.poll() is None, process.communicate()
         assert time.monotonic() < deadline, f"no state file after {timeout} s"
         time.sleep(0.005)
+    return out, state, process
 
 
 @pytest.mark.parametrize("name", sorted(CASES))
@@ -88,10 +88,7 @@ def test_a_render_killed_at_a_random_moment_resumes_to_the_same_image(name, scen
     """SIGKILL at a random moment after the first save; the resumed render equals the uninterrupted one
     bit for bit (passes are seeded independently and join the restored film in the same order)."""
     _, spp, params = CASES[name]
-    out = tmp_path / "out.exr"
-    state = tmp_path / "out.exr.state"
-    process = start_render(scene_files[name], name, out)
-    wait_for(state, process)
+    out, state, process = start_render(scene_files[name], name, tmp_path)
     time.sleep(np.random.default_rng().uniform(0.0, 0.2))
     assert process.poll() is None, "the render ended before it could be killed; make it longer"
     process.kill()
@@ -111,10 +108,7 @@ def test_a_render_killed_at_a_random_moment_resumes_to_the_same_image(name, scen
 def test_ctrl_c_writes_what_was_rendered_and_resume_finishes(scene_files, uninterrupted, tmp_path):
     """Ctrl-C: no traceback, exit 130, the image of the completed passes, the state, and how to resume;
     ``--resume`` then writes the uninterrupted render's image and removes the state."""
-    out = tmp_path / "out.exr"
-    state = tmp_path / "out.exr.state"
-    process = start_render(scene_files["pt"], "pt", out)
-    wait_for(state, process)
+    out, state, process = start_render(scene_files["pt"], "pt", tmp_path)
     process.send_signal(signal.SIGINT)
     stdout, stderr = process.communicate(timeout=60)
     assert process.returncode == 130, stderr
@@ -142,10 +136,7 @@ def test_ctrl_c_writes_what_was_rendered_and_resume_finishes(scene_files, uninte
 
 
 def test_sigterm_stops_cleanly(scene_files, uninterrupted, tmp_path):
-    out = tmp_path / "out.exr"
-    state = tmp_path / "out.exr.state"
-    process = start_render(scene_files["pt"], "pt", out)
-    wait_for(state, process)
+    out, state, process = start_render(scene_files["pt"], "pt", tmp_path)
     process.send_signal(signal.SIGTERM)
     stdout, stderr = process.communicate(timeout=60)
     assert process.returncode == 143 and stderr == ""

@@ -68,13 +68,12 @@ def estimate_render_memory(scene, estimator: Estimator, covariance: bool, thread
                            spectral: bool | None = None) -> int:
     """Bytes a render of ``scene`` with ``estimator`` on ``threads`` workers needs beyond the scene and its
     BVH (see :func:`memory_needs`); ``spectral`` defaults to ``covariance`` (spectral films keep it)."""
-    return sum(_needs(scene, estimator, covariance, threads, spectral).values())
+    return sum(_needs(scene, estimator, covariance, threads, covariance if spectral is None else spectral).values())
 
 
-def _needs(scene, estimator: Estimator, covariance: bool, threads: int, spectral: bool | None) -> dict[str, int]:
+def _needs(scene, estimator: Estimator, covariance: bool, threads: int, spectral: bool) -> dict[str, int]:
     layers = estimator.film_layers(scene) if isinstance(estimator, Bidirectional) else 0
-    return memory_needs(scene.camera.width, scene.camera.height, estimator, covariance,
-                        covariance if spectral is None else spectral, threads, layers)
+    return memory_needs(scene.camera.width, scene.camera.height, estimator, covariance, spectral, threads, layers)
 
 
 def available_memory() -> int:

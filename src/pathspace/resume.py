@@ -231,7 +231,6 @@ class Autosave:
         self.path, self.render, self.every = Path(path), render, every
         self.last = time.monotonic()
         self.saves = 0
-        self.seconds = 0.0  # spent saving (the render clock is paused meanwhile)
 
     def due(self) -> bool:
         """Whether ``every`` seconds have passed since the start or the last save."""
@@ -239,8 +238,6 @@ class Autosave:
 
     def save(self, checkpoint: Checkpoint) -> None:
         """Save the film and render time of ``checkpoint`` (whole passes)."""
-        start = time.monotonic()
         save_state(self.path, RenderState(self.render, checkpoint.film, checkpoint.seconds))
         self.last = time.monotonic()
         self.saves += 1
-        self.seconds += self.last - start

@@ -43,6 +43,7 @@ from hypothesis import strategies as st
 
 import pathspace as ps
 from pathspace import SceneError
+from conftest import scene_dict
 
 ROOT = Path(__file__).resolve().parents[2]
 RESOLUTION = (8, 8)
@@ -545,12 +546,8 @@ class Format:
 
 def toml_seeds() -> list[tuple[str, str, dict[str, bytes]]]:
     """Every scene of ``scenes/``, at 8x8 pixels."""
-    seeds = []
-    for path in sorted((ROOT / "scenes").glob("*/scene.toml")):
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-        data["camera"]["resolution"] = list(RESOLUTION)
-        seeds.append((path.parent.name, dump_toml(data), {}))
-    return seeds
+    names = sorted(path.parent.name for path in (ROOT / "scenes").glob("*/scene.toml"))
+    return [(name, dump_toml(scene_dict(name, RESOLUTION)), {}) for name in names]
 
 
 FORMATS: dict[str, Format] = {

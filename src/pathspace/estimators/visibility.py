@@ -24,20 +24,13 @@ def segment_blocked(scene, a: np.ndarray, eps_a: np.ndarray, n_a: np.ndarray, b:
 def light_sample_blocked(scene, p: np.ndarray, eps: np.ndarray, n: np.ndarray, ls, lanes: np.ndarray) -> np.ndarray:
     """Whether the segments from receivers ``p`` (with error bounds ``eps`` and normals ``n``, all full
     width) to the light samples ``ls`` are blocked, for the lanes ``lanes``.  Rays toward infinite lights
-    have no end."""
+    have no end (their samples' points are zeros: the segments computed for them are replaced)."""
     start, normal, epsilon = np.take(p, lanes, axis=1), np.take(n, lanes, axis=1), eps.take(lanes)
+    origin, direction, tmax = shadow_ray(start, normal, epsilon, np.take(ls.point, lanes, axis=1),
+                                         np.take(ls.normal, lanes, axis=1), ls.epsilon.take(lanes))
     finite = np.isfinite(ls.distance.take(lanes))
-    blocked = np.empty(lanes.size, dtype=bool)
-    near = np.flatnonzero(finite)
-    if near.size:
-        k = lanes.take(near)
-        origin, direction, tmax = shadow_ray(np.take(start, near, axis=1), np.take(normal, near, axis=1),
-                                             epsilon.take(near), np.take(ls.point, k, axis=1),
-                                             np.take(ls.normal, k, axis=1), ls.epsilon.take(k))
-        blocked[near] = scene.accel.occluded(origin, direction, 0.0, tmax, threads=1)
-    far = np.flatnonzero(~finite)
-    if far.size:
-        wi = np.take(ls.wi, lanes.take(far), axis=1)
-        origin = offset_origin(np.take(start, far, axis=1), np.take(normal, far, axis=1), epsilon.take(far), wi)
-        blocked[far] = scene.accel.occluded(origin, wi, 0.0, np.inf, threads=1)
-    return blocked
+    if not finite.all():
+        wi = np.take(ls.wi, lanes, axis=1)
+        origin = np.where(finite, origin, offset_origin(start, normal, epsilon, wi))
+        direction, tmax = np.where(finite, direction, wi), np.where(finite, tmax, np.float32(np.inf))
+    return scene.accel.occluded(origin, direction, 0.0, tmax, threads=1)

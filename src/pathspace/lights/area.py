@@ -85,7 +85,7 @@ class AreaLight(Light):
         point, normal, wi, distance, cos_light, pdf = tables.sample(idx, receivers, u, measure)
         facing = tables.two_sided.take(idx) | (cos_light > 0)
         return LightSample(wi, distance, point, normal, tables.radiance_of(idx, colours), facing, pdf,
-                           np.zeros(pdf.shape, dtype=bool), cos_light, tables.table[12].take(idx))
+                           np.zeros(pdf.shape, dtype=bool), tables.table[12].take(idx))
 
     @staticmethod
     def pdf_li(tables: "AreaTables", idx, receivers, points, measure: str) -> np.ndarray:

@@ -60,8 +60,7 @@ class LightSample:
     the light emits toward the receiver (one-sided area lights); ``pdf``
     (N,) float64 solid-angle density (with the selection pmf once the
     LightSet has chosen the light; for delta lights the pmf alone);
-    ``delta`` (N,); ``cos_light`` (N,) float32 dot(normal, -wi) for area
-    lights, 1 otherwise; ``epsilon`` (N,) float32 error bound of the light's
+    ``delta`` (N,); ``epsilon`` (N,) float32 error bound of the light's
     surface (area lights; else 0); ``entity`` (N,) int64 the sampled light
     (set by the LightSet).
     """
@@ -74,7 +73,6 @@ class LightSample:
     facing: np.ndarray
     pdf: np.ndarray
     delta: np.ndarray
-    cos_light: np.ndarray
     epsilon: np.ndarray
     entity: np.ndarray | None = None
 

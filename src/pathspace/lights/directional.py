@@ -69,7 +69,7 @@ class DirectionalLight(Light):
                            distance=np.full(count, np.inf, np.float32), point=np.zeros((3, count), np.float32),
                            normal=np.zeros((3, count), np.float32), value=colours.lookup(tables.irradiance, idx),
                            facing=np.ones(count, bool), pdf=np.ones(count), delta=np.ones(count, bool),
-                           cos_light=np.ones(count, np.float32), epsilon=np.zeros(count, np.float32))
+                           epsilon=np.zeros(count, np.float32))
 
     @staticmethod
     def sample_le(tables: "DirectionalTables", idx, u, colours, context: LightContext) -> EmissionSample:

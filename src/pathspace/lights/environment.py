@@ -62,7 +62,7 @@ class Environment(Light):
                            point=np.zeros((3, count), np.float32), normal=np.zeros((3, count), np.float32),
                            value=colours.lookup(tables, idx), facing=np.ones(count, bool),
                            pdf=np.full(count, warp.INV_FOUR_PI), delta=np.zeros(count, bool),
-                           cos_light=np.ones(count, np.float32), epsilon=np.zeros(count, np.float32))
+                           epsilon=np.zeros(count, np.float32))
 
     @staticmethod
     def pdf_li(tables: ColourTable, idx, receivers, points, measure: str) -> np.ndarray:

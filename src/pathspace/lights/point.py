@@ -106,5 +106,5 @@ def delta_light_sample(tables: PointTables, idx, receivers, colours, falloff=Non
     return LightSample(wi=direction.astype(np.float32), distance=dist.astype(np.float32),
                        point=position.astype(np.float32), normal=np.zeros((3, count), np.float32),
                        value=colours.lookup(tables.intensity, idx) * (falloff / dist2), facing=np.ones(count, bool),
-                       pdf=np.ones(count), delta=np.ones(count, bool), cos_light=np.ones(count, np.float32),
+                       pdf=np.ones(count), delta=np.ones(count, bool),
                        epsilon=np.zeros(count, np.float32))

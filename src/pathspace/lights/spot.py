@@ -48,7 +48,8 @@ class SpotLight(Light):
 
     def translated(self, offset: np.ndarray) -> "SpotLight":
         """The light moved by ``offset`` (3,) (into the scene's render space)."""
-        return replace(self, position=tuple(np.add(self.position, offset).tolist()), look_at=tuple(np.add(self.look_at, offset).tolist()))
+        return replace(self, position=tuple(np.add(self.position, offset).tolist()),
+                       look_at=tuple(np.add(self.look_at, offset).tolist()))
 
     @classmethod
     def from_fields(cls, fields: "Fields") -> "SpotLight":

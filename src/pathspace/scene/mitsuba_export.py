@@ -18,7 +18,7 @@ import re
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -201,7 +201,7 @@ def _clip_planes(scene: Scene) -> tuple[float, float]:
     return (near if near > 0 else 1e-7 * farthest), 2.0 * farthest
 
 
-def _sensor(scene: Scene, origin: np.ndarray, problems: list[str]) -> dict:
+def _sensor(scene: Scene, problems: list[str]) -> dict:
     camera = scene.camera
     if type(camera) not in (PinholeCamera, ThinLensCamera):
         problems.append(f"camera: Mitsuba 3 has no counterpart of {type(camera).__name__}")
@@ -209,8 +209,9 @@ def _sensor(scene: Scene, origin: np.ndarray, problems: list[str]) -> dict:
     film = {"type": "hdrfilm", "width": camera.width, "height": camera.height, "rfilter": {"type": "box"}}
     sensor = {"type": "thinlens" if isinstance(camera, ThinLensCamera) else "perspective", "fov": float(camera.fov),
               "fov_axis": camera.fov_axis, "near_clip": near, "far_clip": far,
-              "to_world": LookAt(tuple((camera.position + origin).tolist()), tuple((camera.look_at + origin).tolist()),
-                                 tuple(camera.up.tolist())), "film": film}
+              "to_world": LookAt(tuple(scene.to_world(camera.position).tolist()),
+                                 tuple(scene.to_world(camera.look_at).tolist()), tuple(camera.up.tolist())),
+              "film": film}
     if isinstance(camera, ThinLensCamera):
         sensor.update(aperture_radius=camera.lens_radius, focus_distance=camera.focus_distance)
     if scene.render_spp is not None:
@@ -218,19 +219,19 @@ def _sensor(scene: Scene, origin: np.ndarray, problems: list[str]) -> dict:
     return sensor
 
 
-def _light(light: Any, origin: np.ndarray, problems: list[str]) -> dict:
-    """A point, spot, directional or environment light as a Mitsuba emitter."""
+def _light(light: Any, to_world: Callable[[Any], np.ndarray], problems: list[str]) -> dict:
+    """A point, spot, directional or environment light as a Mitsuba emitter (``to_world``: the scene's)."""
     if isinstance(light, PointLight):
-        return {"type": "point", "position": (np.add(light.position, origin)).tolist(),
+        return {"type": "point", "position": to_world(light.position).tolist(),
                 "intensity": _colour(light.intensity)}
     if isinstance(light, SpotLight):
         if light.falloff_start < light.cone_angle:
-            problems.append(f"spot light at {np.add(light.position, origin).tolist()}: falloff_start "
+            problems.append(f"spot light at {to_world(light.position).tolist()}: falloff_start "
                             f"{light.falloff_start:g} < cone_angle {light.cone_angle:g}: pathspace's smooth falloff "
                             "has no Mitsuba counterpart (Mitsuba's is linear in angle); a hard edge has")
         up = orthonormal_basis(light.axis[:, None])[0][:, 0]
-        return {"type": "spot", "to_world": LookAt(tuple(np.add(light.position, origin).tolist()),
-                                                   tuple(np.add(light.look_at, origin).tolist()), tuple(up.tolist())),
+        return {"type": "spot", "to_world": LookAt(tuple(to_world(light.position).tolist()),
+                                                   tuple(to_world(light.look_at).tolist()), tuple(up.tolist())),
                 "intensity": _colour(light.intensity), "cutoff_angle": float(light.cone_angle),
                 "beam_width": float(light.cone_angle)}
     if isinstance(light, DirectionalLight):
@@ -252,13 +253,12 @@ def _unique(name: str, taken: set[str]) -> str:
 def _export(scene: Scene, folder: Path, relative_to: Path | None) -> _Export:
     """The Mitsuba description of ``scene``; mesh files are named in ``folder`` (relative to ``relative_to``
     when given)."""
-    origin = np.asarray(getattr(scene, "origin", np.zeros(3)), dtype=np.float64)
     problems: list[str] = []
     notes: list[str] = []
     taken = {"type", "integrator", "sensor"}
     # Mitsuba's path tracer with unbounded depth: the full solution, as pathspace's estimators by default.
     description: dict[str, Any] = {"type": "scene", "integrator": {"type": "path", "max_depth": -1},
-                                   "sensor": _sensor(scene, origin, problems)}
+                                   "sensor": _sensor(scene, problems)}
     material_ids = []
     for name, material in zip(scene.materials.names, scene.materials.materials):
         material_ids.append(_unique(name, taken))
@@ -276,7 +276,7 @@ def _export(scene: Scene, folder: Path, relative_to: Path | None) -> _Export:
             used, faces = np.unique(scene.mesh.indices[chosen], return_inverse=True)
             key = _unique(shape_name if part == 0 else f"{shape_name}#{part}", taken)
             mesh_path = folder / f"{len(meshes):03d}-{re.sub(r'[^A-Za-z0-9_.-]+', '_', key)}.ply"
-            meshes.append((mesh_path, scene.mesh.vertices[used] + origin, faces.reshape(-1, 3)))
+            meshes.append((mesh_path, scene.to_world(scene.mesh.vertices[used]), faces.reshape(-1, 3)))
             filename = (mesh_path.relative_to(relative_to) if relative_to else mesh_path).as_posix()
             shape = {"type": "ply", "filename": filename,
                      "face_normals": True, "bsdf": {"type": "ref", "id": material_ids[material]}}
@@ -288,7 +288,7 @@ def _export(scene: Scene, folder: Path, relative_to: Path | None) -> _Export:
                 shape["emitter"] = {"type": "area", "radiance": _colour(light.radiance)}
             description[key] = shape
     for k, light in enumerate(light for light in scene.lights.lights if not isinstance(light, AreaLight)):
-        description[_unique(f"light-{k}", taken)] = _light(light, origin, problems)
+        description[_unique(f"light-{k}", taken)] = _light(light, scene.to_world, problems)
     if problems:
         raise SceneError(f"{scene.source or '(scene)'}: cannot be written as a Mitsuba 3 scene:\n  "
                          + "\n  ".join(problems))

@@ -36,6 +36,7 @@ from ..bsdfs.conductor import ALPHA_RANGE
 from ..fields import SceneError
 from ..vecmath import orthonormal_basis
 from . import shapes
+from .mesh import triangle_cross
 from .model import Scene
 from .toml_loader import scene_from_dict
 
@@ -254,8 +255,7 @@ def _is_object(element: Element) -> bool:
 def _sphere_area_kept() -> float:
     """Area of the icosphere Mitsuba spheres become, over the sphere's."""
     v, f = shapes.sphere(np.zeros(3), 1.0, SPHERE_SUBDIVISIONS)
-    return float(np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1).sum() / 2
-                 / (4 * np.pi))
+    return float(np.linalg.norm(triangle_cross(v, f), axis=1).sum() / 2 / (4 * np.pi))
 
 
 def _has_vertex_normals(path: Path) -> bool:
@@ -371,8 +371,8 @@ class _Props:
 
     def colour(self, name: str, default: float) -> list[float] | dict:
         """An RGB triple or a sampled spectrum table from ``<rgb>``, ``<srgb>``, ``<spectrum>`` or ``<float>``."""
-        if any(given == name for given, _, _ in self.objects):
-            where = next(at for given, _, at in self.objects if given == name)
+        where = next((at for given, _, at in self.objects if given == name), None)
+        if where is not None:
             self.take_named(name)
             self.converter.unsupported(where, f"{name}: textures are not supported (a constant colour or "
                                               "spectrum is)")
@@ -432,7 +432,7 @@ class _Converter:
         self.where: dict[str, str] = {}
         self.materials: dict[str, dict] = {}
         self.material_line: dict[str, float] = {}
-        self.material_of: dict[int, str] = {}
+        self.material_of: dict[int, str | None] = {}
         self.bsdfs_used: set[int] = set()
         self.one_sided: list[str] = []
         self.shapes: list[dict] = []
@@ -528,7 +528,7 @@ class _Converter:
             else:
                 self.fail(op, f"unexpected <{op.tag}> in <transform>")
             matrix = step @ matrix
-        return _Transform(matrix, lookat if len(operations) == 1 and lookat is not None else None)
+        return _Transform(matrix, lookat if len(operations) == 1 else None)
 
     def _look_at(self, element: Element, origin: np.ndarray, target: np.ndarray, up: np.ndarray | None) -> np.ndarray:
         """Mitsuba's look_at: columns left = up x dir, up' = dir x left, dir, origin (a zero up is chosen
@@ -582,8 +582,7 @@ class _Converter:
 
     def _spectrum_file(self, element: Element) -> dict:
         """A spectrum file: lines of "wavelength value", # comments (Mitsuba's .spd format)."""
-        path = Path(element.attrs["filename"])
-        path = path if path.is_absolute() else self.base / path
+        path = self.base / element.attrs["filename"]  # an absolute filename replaces the base
         if not path.is_file():
             self.fail(element, f"spectrum file not found: {path}")
         wavelengths, values = [], []
@@ -805,6 +804,7 @@ class _Converter:
         if id(element) in self.material_of:
             return self.material_of[id(element)]
         self.bsdfs_used.add(id(element))
+        self.material_of[id(element)] = None  # until converted: an unsupported BSDF is reported once
         plugin = element.attrs.get("type", "")
         named = element
         if plugin == "twosided":
@@ -924,8 +924,7 @@ class _Converter:
         keep_winding = plugin in _KEEP_WINDING
         if plugin in ("obj", "ply"):
             shape.update(type="mesh", file=props.string("filename"))
-            path = Path(shape["file"]) if Path(shape["file"]).is_absolute() else self.base / shape["file"]
-            file_normals = _has_vertex_normals(path)
+            file_normals = _has_vertex_normals(self.base / shape["file"])
             if not props.boolean("face_normals", False):
                 self.smooth_meshes.append((len(self.shapes), element.describe(), file_normals))
                 keep_winding = not file_normals
@@ -1018,7 +1017,7 @@ class _Converter:
                 self.unsupported(element, f"beam_width {beam:g} < cutoff_angle {cutoff:g}: Mitsuba's spot falls off "
                                           "linearly in angle, pathspace's smoothly (pbrt-v4's smoothstep); only a hard "
                                           "edge (beam_width = cutoff_angle) maps exactly")
-            light = {"type": "spot", "position": position.tolist(), "look_at": np.asarray(target).tolist(),
+            light = {"type": "spot", "position": position.tolist(), "look_at": target.tolist(),
                      "intensity": props.colour("intensity", 1.0), "cone_angle": cutoff, "falloff_start": cutoff}
         elif plugin == "directional":
             direction = props.triple("direction")

@@ -107,7 +107,6 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>", base_dir
                         f"(lights{environments})", "lights")
     top.finish()
     mesh, shape_names, emitters = _shapes(top, shape_list, names, origin)
-    _check_extent(top, mesh)
     camera = camera.translated(-origin)
     # Lights at infinity: their power (for light selection) is what crosses the geometry's bounding sphere;
     # light tracing and BDPT start their rays on a disk outside a sphere that also holds a thin lens.
@@ -122,11 +121,12 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>", base_dir
                  source=source, render_spp=render_spp, fingerprint=fingerprint(data, top.files), origin=origin)
 
 
-def _check_extent(top: Fields, mesh: TriangleMesh) -> None:
-    """Refuse geometry that float32 tracing cannot render faithfully around the render origin (measured on
-    the Cornell box: right from 1e-8 to 1e12 times its size, 7% dark at 1e-9, wrong beyond 1e12)."""
-    lo, hi = mesh.bounds()
-    reach, extent = float(np.abs(mesh.vertices).max()), float(np.linalg.norm(hi - lo))
+def _check_extent(top: Fields, vertices: np.ndarray) -> None:
+    """Refuse geometry (render-space ``vertices``) that float32 tracing cannot render faithfully around the
+    render origin (measured on the Cornell box: right from 1e-8 to 1e12 times its size, 7% dark at 1e-9,
+    wrong beyond 1e12)."""
+    reach = float(np.abs(vertices).max())
+    extent = float(np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0)))
     if reach > MAX_RENDER_COORDINATE or extent < MIN_SCENE_EXTENT:
         raise top.error(f"the geometry spans {extent:.3g} scene units and reaches {reach:.3g} from the render origin "
                         f"(the camera unless [render] origin is set); pathspace renders geometry of extent >= "
@@ -178,8 +178,9 @@ def _shapes(top: Fields, shape_list: list, material_names: list[str], origin: np
         names.append(name)
         offset += len(v)
         triangle_offset += len(f)
-    mesh = TriangleMesh(np.concatenate(vertices) - origin, np.concatenate(indices), np.concatenate(material_ids),
-                        np.concatenate(shape_ids))
+    vertices = np.concatenate(vertices) - origin
+    _check_extent(top, vertices)
+    mesh = TriangleMesh(vertices, np.concatenate(indices), np.concatenate(material_ids), np.concatenate(shape_ids))
     return mesh, names, emitters
 
 
