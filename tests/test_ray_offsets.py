@@ -9,6 +9,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+import pathspace as ps
 from pathspace import Accel
 from pathspace.estimators.visibility import segment_blocked
 from pathspace.scene.mesh import TriangleMesh
@@ -117,3 +118,30 @@ def test_a_surface_a_millionth_in_front_of_a_point_blocks_it(gap):
     blocked = segment_blocked(scene, a, np.zeros(n, np.float32), np.zeros((3, n), np.float32), b, eps_b, n_b)
     assert blocked.all(), f"{np.count_nonzero(~blocked)} of {n} leak through a surface {gap:g} in front"
     assert np.all(eps_b < gap)
+
+
+def test_a_ray_starting_in_another_surfaces_plane_does_not_hit_it_at_distance_zero():
+    """A point on one wall at its seam with another, moved along its own normal, can lie exactly in the other
+    wall's float32 plane; a ray from it into that wall must not report a hit at t = 0 (an infinite geometry
+    term: the NaN MIS weights once seen in the Cornell box's light walks)."""
+    from pathspace.estimators.walk import WALK_FIELDS, Dimensions, Walk
+    from pathspace.estimators.wavefront import Lanes
+    from pathspace.roulette import RussianRoulette
+    from pathspace.sampler import StreamSamplers
+
+    data = {"camera": {"position": [0.0, 0.0, 0.0], "look_at": [0.0, 0.0, -1.0], "fov": 40, "resolution": [4, 4]},
+            "materials": {"white": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
+            "shapes": [{"type": "triangles", "material": "white",   # the back wall, z = -1
+                        "vertices": [[-1, -1, -1], [1, -1, -1], [1, 1, -1], [-1, 1, -1]],
+                        "triangles": [[0, 1, 2], [0, 2, 3]]}]}
+    scene = ps.scene_from_dict(data)
+    assert np.all(scene.origin == 0.0)
+    n = 5
+    origin = np.array([[0.25] * n, [0.0] * n, [-1.0] * n], np.float32)   # exactly in the wall's plane
+    direction = np.array([[0.0] * n, [0.6] * n, [-0.8] * n], np.float32)  # into (through) the wall
+    assert scene.accel.intersect(origin, direction, 0.0).t[0] == 0.0     # what Embree reports from t = 0
+    lanes = Lanes(WALK_FIELDS, depth=np.zeros(n, np.int32), origin=origin, direction=direction,
+                  beta=np.ones((3, n)), pdf=np.ones(n), delta=np.zeros(n, bool))
+    walk = Walk(scene, lanes, StreamSamplers(0).open([(0,)], [n]), RussianRoulette("off", 1, 0.5, 1.0),
+                Dimensions(bsdf=3))
+    assert np.all(walk.trace().prim < 0)

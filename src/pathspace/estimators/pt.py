@@ -60,7 +60,7 @@ from ..mis import TWO_STRATEGY, mis_weight
 from ..roulette import RussianRoulette, roulette_warnings
 from ..sampler import Sampler
 from ..spectra import RGBMode
-from ..vecmath import dot, offset_origin
+from ..vecmath import RAY_TMIN, dot, offset_origin
 from . import parameters as p
 from .base import TILE_PIXELS, Counters, Estimator, ItemResult, RenderJob, WorkItem, parameter
 from .visibility import light_sample_blocked
@@ -426,7 +426,7 @@ class PathTracer(Estimator):
             return total
         emitters = scene.emitter_accel
         lanes = np.arange(count)
-        o, d, tmin = origins, direction, np.float32(0)
+        o, d, tmin = origins, direction, RAY_TMIN
         while lanes.size:
             h = emitters.intersect(o, d, tmin, np.inf, normals=False, threads=1)
             found = np.flatnonzero(h.prim >= 0)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..vecmath import offset_origin, shadow_ray
+from ..vecmath import RAY_TMIN, offset_origin, shadow_ray
 
 __all__ = ["segment_blocked", "light_sample_blocked"]
 
@@ -18,7 +18,7 @@ def segment_blocked(scene, a: np.ndarray, eps_a: np.ndarray, n_a: np.ndarray, b:
     """Whether geometry lies between points ``a`` and ``b`` (3, N) float32; ``eps_*`` are the error bounds
     of the surfaces they lie on (0 off surfaces) and ``n_*`` those surfaces' normals."""
     origin, direction, tmax = shadow_ray(a, n_a, eps_a, b, n_b, eps_b)
-    return scene.accel.occluded(origin, direction, 0.0, tmax, threads=1)
+    return scene.accel.occluded(origin, direction, RAY_TMIN, tmax, threads=1)
 
 
 def light_sample_blocked(scene, p: np.ndarray, eps: np.ndarray, n: np.ndarray, ls, lanes: np.ndarray) -> np.ndarray:
@@ -33,4 +33,4 @@ def light_sample_blocked(scene, p: np.ndarray, eps: np.ndarray, n: np.ndarray, l
         wi = np.take(ls.wi, lanes, axis=1)
         origin = np.where(finite, origin, offset_origin(start, normal, epsilon, wi))
         direction, tmax = np.where(finite, direction, wi), np.where(finite, tmax, np.float32(np.inf))
-    return scene.accel.occluded(origin, direction, 0.0, tmax, threads=1)
+    return scene.accel.occluded(origin, direction, RAY_TMIN, tmax, threads=1)

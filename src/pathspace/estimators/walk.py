@@ -39,7 +39,7 @@ import numpy as np
 
 from ..bsdfs import BSDFSample, Surface
 from ..roulette import RussianRoulette
-from ..vecmath import dot, offset_origin
+from ..vecmath import RAY_TMIN, dot, offset_origin
 from .wavefront import Lanes
 
 __all__ = ["WALK_FIELDS", "Arrival", "Dimensions", "Walk"]
@@ -126,7 +126,7 @@ class Walk:
         lanes = self.lanes
         lanes.depth += 1
         self.rays += lanes.size
-        return self.scene.accel.intersect(lanes.origin, lanes.direction, normals=False, threads=1)
+        return self.scene.accel.intersect(lanes.origin, lanes.direction, RAY_TMIN, normals=False, threads=1)
 
     def keep(self, indices: np.ndarray, *arrays: np.ndarray):
         """Keep only lanes ``indices`` (increasing): their state, their sampler, and the per-lane ``arrays``
