@@ -32,9 +32,11 @@ import sys
 import warnings
 from pathlib import Path
 
+import numpy as np
+
 from . import __version__, metrics
 from .contact_sheet import strategy_layers, write_contact_sheet
-from .driver import RenderResult, render
+from .driver import RenderResult, can_save_state, render
 from .estimators import ESTIMATORS, Estimator, make_estimator
 from .experiment.specs import EstimatorSpec, parse_assignment
 from .imageio import atomic_output, read_exr, write_exr, write_png
@@ -190,7 +192,8 @@ def _write_render(out: Path, result: RenderResult, args) -> list[str]:
     paths written."""
     metadata = {k: v for k, v in result.stats.items() if k != "plan"}
     layers = strategy_layers(result.strategies) if result.strategies else None
-    write_exr(out, result.image, result.variance, metadata, xyz=result.xyz if args.xyz else None, layers=layers)
+    variance = None if np.isnan(result.variance).all() else result.variance   # unknown for Markov chains
+    write_exr(out, result.image, variance, metadata, xyz=result.xyz if args.xyz else None, layers=layers)
     written = [str(out)]
     if not args.no_png:
         png = out.with_suffix(".png")
@@ -208,15 +211,18 @@ def _render(args) -> int:
     if out.suffix.lower() != ".exr":
         out = out.with_suffix(".exr")
     _writable(out)
-    state = out.with_name(out.name + ".state")
     estimator = _estimator(args)
+    state = out.with_name(out.name + ".state") if can_save_state(estimator) else None
+    if state is None and args.resume:
+        raise ValueError(f"--resume: estimator {estimator.name!r} renders with its own loop (Markov chains): its "
+                         "renders cannot be saved and resumed")
     scene = _load(args)
     if args.resume and not state.exists():
         print(f"no saved state at {state}: starting from the beginning")
     result = render(scene, estimator, spp=args.spp, time=args.time, seed=args.seed, threads=args.threads,
                     progress=not args.quiet, spectral=args.spectral, wavelength_sampling=args.wavelengths,
-                    state_file=state, save_every=args.save_every or None, resume=args.resume, keep_state=True,
-                    stop_on_signal=True)
+                    state_file=state, save_every=(args.save_every or None) if state else None, resume=args.resume,
+                    keep_state=state is not None, stop_on_signal=True)
     stats = result.stats
     written = _write_render(out, result, args) if stats["spp"] or not stats["stopped"] else []
     print(f"colour: {stats['mode']} ({stats['mode_reason']})")
@@ -230,11 +236,15 @@ def _render(args) -> int:
         budget = f"{stats['spp']} of {target['spp']} spp" if target["spp"] is not None else (
             f"{stats['spp']} spp in {stats['seconds']:.1f} of {target['time']:g} s")
         saved = f"wrote {', '.join(written)} ({stats['spp']} spp)" if written else "no pass was complete, no image"
+        if state is None:
+            print(f"stopped by {stats['stopped']} after {budget}: {saved} (this estimator cannot be resumed)")
+            return 128 + signal.Signals[stats["stopped"]].value
         command = shlex.join(["pathspace", *args.argv] + ([] if args.resume else ["--resume"]))
         print(f"stopped by {stats['stopped']} after {budget}: {saved}; the render's state is in {state}\n"
               f"continue it with: {command}")
         return 128 + signal.Signals[stats["stopped"]].value
-    state.unlink(missing_ok=True)
+    if state is not None:
+        state.unlink(missing_ok=True)
     print("wrote " + ", ".join(written))
     return 0
 

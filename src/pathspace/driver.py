@@ -32,7 +32,7 @@ from .sampler import SamplerSource, StreamSamplers
 from .scene import Scene, load_scene
 from .spectra import colour_mode
 
-__all__ = ["render", "RenderResult"]
+__all__ = ["render", "RenderResult", "can_save_state"]
 
 # Wavefront arrays are a few MB each and are allocated and freed many times a bounce.  By default glibc
 # serves such blocks with fresh mmap()s or trims the heap after they are freed, so every allocation
@@ -60,7 +60,8 @@ class RenderResult:
     Attributes
     ----------
     image : (height, width, 3) float64, the per-pixel mean in linear sRGB
-    variance : (height, width, 3) float64, estimated variance of that mean
+    variance : (height, width, 3) float64, estimated variance of that mean; NaN (unknown) for estimators whose
+        passes are correlated (Markov chains: estimate it from independent renders, e.g. seeds)
     stats : estimator, parameters, plan, colour mode and why, spp, seconds (of rendering: scene loading
         and BVH builds excluded; a resumed render's include its earlier sessions), samples per second,
         rays, nonfinite (pixel samples dropped at the film for a NaN or Inf), nonfinite_contributions
@@ -114,6 +115,11 @@ class RenderResult:
         text = (f"{s['estimator']} ({s['mode']}): {s['spp']} spp at {s['width']}x{s['height']} in {s['seconds']:.2f} s "
                 f"({s['samples_per_second'] / 1e6:.3f} M samples/s, {s['rays_per_second'] / 1e6:.2f} M rays/s, "
                 f"{s['threads']} threads)")
+        if "metropolis" in s and "mutations" in s["metropolis"]:
+            m = s["metropolis"]
+            text += (f"; Metropolis: {m['chains']} chains, {m['mutations_per_second'] / 1e6:.3f} M mutations/s, "
+                     f"brightness {m['brightness']:.6g} +- {m['brightness_standard_error']:.2g} "
+                     f"(bootstrap {m['bootstrap']}), longest rejection run {m['longest_rejection_run']}")
         if s["nonfinite"]:
             text += f"; {s['nonfinite']} non-finite samples were dropped"
         if s["nonfinite_contributions"]:
@@ -252,13 +258,20 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
              "resumed": {"passes": restored, "seconds": previous} if state is not None else None,
              "state_file": None if state_file is None else str(state_file),
              "saves": 0 if autosave is None else autosave.saves, **job.stats}
-    return RenderResult(image=film.image(), variance=film.image_variance(), stats=stats, film=film,
+    variance = film.image_variance() if estimator.independent_passes else np.full(film.image().shape, np.nan)
+    return RenderResult(image=film.image(), variance=variance, stats=stats, film=film,
                         xyz=film.mean() if mode.name == "spectral" else None)
+
+
+def can_save_state(estimator: Estimator) -> bool:
+    """Whether renders with ``estimator`` can be saved to a state file and resumed: estimators on the passes
+    loop (whole, independent passes); not those with their own loop (Markov chains)."""
+    return type(estimator).render is Estimator.render
 
 
 def _check_resumable(scene: Scene, estimator: Estimator, samplers: SamplerSource | None) -> None:
     """Refuse a ``state_file`` for renders that a state file cannot restore exactly."""
-    if type(estimator).render is not Estimator.render:
+    if not can_save_state(estimator):
         raise ValueError(f"state_file: estimator {estimator.name!r} renders with its own loop; only estimators "
                          "on the passes loop (whole, independent passes) can be saved and resumed")
     if samplers is not None:

@@ -14,11 +14,14 @@ import dataclasses
 from .base import Estimator
 from .bdpt import BDPT
 from .lt import LightTracer
+from .mmlt import MMLT
+from .pssmlt import PSSMLT
 from .pt import PathTracer
 
 __all__ = ["ESTIMATORS", "Estimator", "make_estimator"]
 
-ESTIMATORS: dict[str, type[Estimator]] = {"pt": PathTracer, "lt": LightTracer, "bdpt": BDPT}
+ESTIMATORS: dict[str, type[Estimator]] = {"pt": PathTracer, "lt": LightTracer, "bdpt": BDPT, "pssmlt": PSSMLT,
+                                             "mmlt": MMLT}
 
 
 def make_estimator(name: str, **params) -> Estimator:

@@ -189,6 +189,9 @@ class Estimator(ABC):
 
     name: ClassVar[str]
     tile_pixels: ClassVar[int] = TILE_PIXELS
+    # Whether passes are independent estimates (so the film's variance across passes is the variance of its
+    # mean); False for Markov chains, whose successive passes are correlated.
+    independent_passes: ClassVar[bool] = True
 
     def __post_init__(self) -> None:
         for f in dataclasses.fields(self):

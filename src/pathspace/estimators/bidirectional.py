@@ -168,42 +168,54 @@ class Bidirectional(Estimator):
         result.samples = mode.to_film(own, state, np.arange(count))
         return result
 
-    def evaluate(self, scene, pixels: np.ndarray, samplers: Mapping[str, Sampler], mode=None) -> StrategyContributions:
+    def evaluate(self, scene, pixels: np.ndarray, samplers: Mapping[str, Sampler], mode=None,
+                 counters: Counters | None = None, chosen: tuple[np.ndarray, np.ndarray] | None = None
+                 ) -> StrategyContributions:
         """Every strategy's contribution of the paths through ``pixels`` (N,) built from given numbers:
         ``samplers`` has a sampler of N lanes for each stream of :data:`STREAMS` (e.g.
         :class:`~pathspace.sampler.ReplaySampler` s of primary samples).  The weighted values of a lane's
-        own pixel (``raster`` NaN) plus its splats are the samples a render adds for these numbers."""
+        own pixel (``raster`` NaN) plus its splats are the samples a render adds for these numbers.  Rays,
+        subpath lengths and dropped connections are counted into ``counters`` if given.  ``chosen`` = (s, t)
+        per lane: compute only that strategy of each lane, with subpaths of at most t camera and s light
+        vertices (multiplexed MLT)."""
         mode = RGBMode() if mode is None else mode
         pixels = np.asarray(pixels, dtype=np.int64)
         if not scene.lights.count:
             return StrategyContributions.concatenate([])
-        batch, state = self._subpaths(scene, mode, pixels, samplers, np.array([0, pixels.size]), Counters(),
-                                      RenderControl())
+        counters = Counters() if counters is None else counters
+        batch, state = self._subpaths(scene, mode, pixels, samplers, np.array([0, pixels.size]), counters,
+                                      RenderControl(), chosen)
         rows = []
         for part in self._contributions(batch):
             weights, weighted, pixel, _ = self._weighted(part, batch, pixels)
             rows.append(StrategyContributions(part.lane, part.s, part.t, mode.to_film(part.value, state, part.lane),
                                               mode.to_film(weighted, state, part.lane), weights, pixel, part.raster))
+        counters.rays += batch.rays
+        counters.nonfinite_contributions += batch.nonfinite
         return StrategyContributions.concatenate(rows)
 
     def _subpaths(self, scene, mode, pixels: np.ndarray, samplers: Mapping[str, Sampler], units: np.ndarray,
-                  counters: Counters, control: RenderControl) -> tuple[Batch, Lanes]:
-        """The subpaths of lanes through ``pixels`` from ``samplers``' numbers, and the lanes' colour state."""
+                  counters: Counters, control: RenderControl,
+                  chosen: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[Batch, Lanes]:
+        """The subpaths of lanes through ``pixels`` from ``samplers``' numbers, and the lanes' colour state
+        (for ``chosen`` strategies, see :meth:`evaluate`)."""
         count = pixels.size
         state = Lanes(mode.path_fields, **mode.start(samplers["wavelengths"].draw(mode.camera_dims)))
         colours = mode.colours(state)
         settings = SubpathSettings(scene, colours, {"diffuse_sampling": self.diffuse_sampling}, self.roulette,
                                    self.light_roulette, self.depth_limit + 1, counters, control)
-        eye = camera_subpaths(settings, pixels, samplers["camera"]) if self.uses_camera_subpaths else None
+        s, t = chosen if chosen is not None else (None, None)
+        eye = (camera_subpaths(settings, pixels, samplers["camera"], None if t is None else np.maximum(t, 1))
+               if self.uses_camera_subpaths else None)
         lens = self.uses_lens_hits and not scene.camera.delta_position
-        light, hits = light_subpaths(settings, count, samplers["light"], lens)
+        light, hits = light_subpaths(settings, count, samplers["light"], lens, None if s is None else np.maximum(s, 1))
         longest = max(int(light.length.max()), 0 if eye is None else int(eye.length.max())) - 1
         counters.longest = max(counters.longest, longest)
         terminated = light.terminated if eye is None else light.terminated | eye.terminated
         if terminated.any():
             mode.terminate_secondary(state, terminated)
         return Batch(scene, light, eye, hits if lens else None, colours, settings.options, self.depth_limit,
-                     units), state
+                     units, chosen=chosen), state
 
     def _weighted(self, part: Contributions, batch: Batch, pixels: np.ndarray):
         """(MIS weights (n,), weighted values (C, n), film pixel (n,), whether each is a splat (n,)) of ``part``'s

@@ -56,9 +56,16 @@ class Batch:
     units: np.ndarray
     rays: int = 0      # shadow rays traced
     nonfinite: int = 0  # contributions dropped because a channel or their weight was NaN or infinite
+    chosen: tuple[np.ndarray, np.ndarray] | None = None   # (s, t) per lane: only that strategy (MMLT); None: all
 
     def __post_init__(self) -> None:
         self.lane_flags = self.scene.lights.flags.take(self.light.entity.take(self.light.offset[:-1]))
+
+    def wanted(self, lane: np.ndarray, s, t) -> np.ndarray | bool:
+        """Whether the strategies (s, t) of connections of ``lane`` are to be computed (all, unless ``chosen``)."""
+        if self.chosen is None:
+            return True
+        return (self.chosen[0].take(lane) == s) & (self.chosen[1].take(lane) == t)
 
     def materials(self, vertices: Vertices) -> MaterialLanes:
         """The materials of surface ``vertices``."""
@@ -112,7 +119,8 @@ def _at_previous(pdf_sa: np.ndarray, vertices: Vertices) -> np.ndarray:
 def emitter_hits(batch: Batch) -> Contributions | None:
     """Camera vertices z_{t-1} (t >= 2) on emitting surfaces or at infinity in the environment."""
     eye, lights = batch.eye, batch.scene.lights
-    z = eye.at(np.flatnonzero((eye.index >= 1) & (eye.index <= batch.max_depth) & (eye.entity >= 0)))
+    z = eye.at(np.flatnonzero((eye.index >= 1) & (eye.index <= batch.max_depth) & (eye.entity >= 0)
+                              & batch.wanted(eye.lane, 0, eye.index + 1)))
     if not z.size:
         return None
     value = z.beta * lights.le(z.entity, z.n, z.wo, batch.colours.take(z.lane))
@@ -138,7 +146,8 @@ def light_samples(batch: Batch) -> Contributions | None:
     lights = scene.lights
     if not lights.count:
         return None
-    z = eye.at(np.flatnonzero((eye.kind == SURFACE) & ~eye.delta & (eye.index + 1 <= batch.max_depth)))
+    z = eye.at(np.flatnonzero((eye.kind == SURFACE) & ~eye.delta & (eye.index + 1 <= batch.max_depth)
+                              & batch.wanted(eye.lane, 1, eye.index + 1)))
     if not z.size:
         return None
     ls = lights.sample_li(z.p, z.u, batch.colours.take(z.lane), "power", "area")
@@ -175,7 +184,8 @@ def lens_samples(batch: Batch) -> Contributions | None:
     # Lights seen directly: area lights only.  A point or spot light would land in a single pixel as
     # I / (d^2 x the pixel's solid angle); path tracing cannot see it, and neither image draws it.
     on_light = (light.kind == LIGHT) & (light.entity >= 0) & ~(lights.flags.take(np.maximum(light.entity, 0)) > 0)
-    y = light.at(np.flatnonzero(((light.kind == SURFACE) & ~light.delta | on_light) & (light.index + 1 <= batch.max_depth)))
+    y = light.at(np.flatnonzero(((light.kind == SURFACE) & ~light.delta | on_light) & (light.index + 1 <= batch.max_depth)
+                                & batch.wanted(light.lane, light.index + 1, 1)))
     if not y.size:
         return None
     wi, we, pdf_lens, lens, raster, valid = camera.sample_importance(y.p, y.u)
@@ -238,7 +248,7 @@ def lens_hits(batch: Batch) -> Contributions | None:
         return None
     # A point or spot light seen directly through the lens is not drawn (see lens_samples).
     direct_delta = (hits.index == 1) & (batch.lane_flags.take(hits.lane) & LIGHT_DELTA).astype(bool)
-    keep = np.flatnonzero((hits.index <= batch.max_depth) & ~direct_delta)
+    keep = np.flatnonzero((hits.index <= batch.max_depth) & ~direct_delta & batch.wanted(hits.lane, hits.index + 1, 0))
     lane, index, point, d = hits.lane[keep], hits.index[keep], hits.point[:, keep], hits.direction[:, keep]
     leaving = -d.astype(np.float64)
     raster, inside = camera.raster(point + leaving, point)
@@ -267,6 +277,9 @@ def joins(batch: Batch):
     """Every pair of non-delta surface vertices y_{s-1}, z_{t-1} (s, t >= 2) of a lane, joined; yields
     :class:`Contributions` chunk by chunk (chunks never span two units)."""
     light, eye = batch.light, batch.eye
+    if batch.chosen is not None:
+        yield from _chosen_joins(batch)
+        return
     cy = np.flatnonzero((light.kind == SURFACE) & ~light.delta)
     cz = np.flatnonzero((eye.kind == SURFACE) & ~eye.delta)
     lanes = light.offset.size - 1
@@ -294,6 +307,25 @@ def joins(batch: Batch):
                 part = _join(batch, light.at(y), eye.at(z))
                 if part is not None:
                     yield part
+
+
+def _chosen_joins(batch: Batch):
+    """The join of each lane's chosen strategy (s, t >= 2), where both subpaths have those vertices."""
+    light, eye = batch.light, batch.eye
+    s, t = batch.chosen
+    lane = np.flatnonzero((s >= 2) & (t >= 2) & (s + t - 1 <= batch.max_depth) & (light.length >= s)
+                          & (eye.length >= t))
+    y = light.offset.take(lane) + s.take(lane) - 1
+    z = eye.offset.take(lane) + t.take(lane) - 1
+    ok = (light.kind.take(y) == SURFACE) & ~light.delta.take(y) & (eye.kind.take(z) == SURFACE) & ~eye.delta.take(z)
+    y, z, lane = y[ok], z[ok], lane[ok]
+    for first, last in zip(batch.units[:-1], batch.units[1:]):
+        mine = np.flatnonzero((lane >= first) & (lane < last))
+        for begin in range(0, mine.size, CHUNK):
+            k = mine[begin:begin + CHUNK]
+            part = _join(batch, light.at(y.take(k)), eye.at(z.take(k)))
+            if part is not None:
+                yield part
 
 
 def _join(batch: Batch, y: Vertices, z: Vertices) -> Contributions | None:

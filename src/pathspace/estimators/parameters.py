@@ -17,7 +17,7 @@ from .base import parameter
 
 __all__ = ["max_depth", "roulette_policy", "roulette_depth", "roulette_probability", "roulette_cap", "light_rr", "light_rr_depth", "light_rr_probability", "light_rr_cap",
            "mis_heuristic", "mis_beta", "mis_strategy", "mis_strategies", "diffuse_sampling", "light_selection",
-           "light_measure", "pyramid"]
+           "light_measure", "pyramid", "underlying_rr", "underlying_rr_depth"]
 
 
 def max_depth(default: int = -1):
@@ -76,6 +76,17 @@ def light_rr_cap():
     """The light subpaths' ``rr_cap``; None: ``rr_cap``."""
     return parameter(None, "rr_cap of light subpaths (default: rr_cap)",
                      _or_none(partial(number, low=0.0, high=1.0, low_open=True, what="a survival cap in (0, 1]")))
+
+
+def underlying_rr():
+    """A Metropolis estimator's roulette policy for the estimator it runs on; None: that estimator's default."""
+    return parameter(None, "Russian roulette policy (default: the underlying estimator's)",
+                     _or_none(partial(choice, options=POLICIES)))
+
+
+def underlying_rr_depth():
+    """A Metropolis estimator's ``rr_depth`` for the estimator it runs on; None: that estimator's default."""
+    return parameter(None, "rr_depth (default: the underlying estimator's)", _or_none(partial(integer, low=1)))
 
 
 def mis_strategies():

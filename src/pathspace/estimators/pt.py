@@ -218,17 +218,22 @@ class PathTracer(Estimator):
             self._bounce(deep, bounce)
         return deep
 
-    def evaluate(self, scene, pixels: np.ndarray, sampler: Sampler, mode=None) -> np.ndarray:
+    def evaluate(self, scene, pixels: np.ndarray, sampler: Sampler, mode=None,
+                 counters: Counters | None = None) -> np.ndarray:
         """Film values (3, N) of the paths through ``pixels`` (N,) built from ``sampler``'s numbers (a
         sampler of N lanes, e.g. a :class:`~pathspace.sampler.ReplaySampler` of primary samples drawn in
-        the order of :meth:`dimensions`): the samples a render would add for these numbers."""
+        the order of :meth:`dimensions`): the samples a render would add for these numbers.  Rays and
+        path lengths are counted into ``counters`` if given."""
         mode = RGBMode() if mode is None else mode
         self.check(scene)
-        bounce = self._bounce_context(scene, mode, Counters())
+        counters = Counters() if counters is None else counters
+        bounce = self._bounce_context(scene, mode, counters)
         walk = self._start(bounce, np.asarray(pixels, dtype=np.int64), sampler, bounce.book.open("paths", len(pixels)))
         deep = None
         while walk.size or deep.size:
             deep = self._advance(walk, deep, bounce)
+            counters.rays += walk.rays + deep.rays
+            walk.rays = deep.rays = 0
         return bounce.book.finished()[0][1]
 
     def _bounce_context(self, scene, mode, counters: Counters) -> _Bounce:

@@ -252,12 +252,19 @@ class _Growth:
         self.terminated = np.zeros(lanes, bool)
         self.lens_hits: list[dict] | None = None   # light walks through a thin lens: rays that hit it
         self.escapes = False                       # camera walks with an environment: vertices at infinity
+        self.limit: np.ndarray | None = None       # most vertices per lane (MMLT's strategies), besides max_vertices
 
     def run(self) -> None:
         """Walk until every subpath has ended or reached ``max_vertices``."""
         walk, settings = self.walk, self.settings
         while walk.size and int(walk.lanes.depth[0]) + 1 < settings.max_vertices:
             settings.control.check()
+            if self.limit is not None:
+                full = int(walk.lanes.depth[0]) + 1 >= self.limit.take(walk.lanes.lane)
+                if full.any():
+                    walk.keep(np.flatnonzero(~full))
+                    if not walk.size:
+                        break
             hits = walk.trace()
             hit = hits.prim >= 0
             if self.lens_hits is not None:
@@ -343,8 +350,9 @@ def _walk_lanes(count: int, **state: np.ndarray) -> Lanes:
                  delta=np.zeros(count, bool), lane=np.arange(count), q=np.ones(count), **state)
 
 
-def camera_subpaths(settings: SubpathSettings, pixels: np.ndarray, sampler) -> Subpaths:
-    """Camera subpaths through ``pixels``, one lane each, from ``sampler``'s numbers.
+def camera_subpaths(settings: SubpathSettings, pixels: np.ndarray, sampler, limit: np.ndarray | None = None) -> Subpaths:
+    """Camera subpaths through ``pixels``, one lane each, from ``sampler``'s numbers; ``limit``: the most
+    vertices of each lane's subpath (besides ``settings.max_vertices``).
 
     Vertex 0 is the lens point (density 1 / lens area; a pinhole's is a delta
     and is given 1), with throughput 1: the pixel value is the average
@@ -365,13 +373,16 @@ def camera_subpaths(settings: SubpathSettings, pixels: np.ndarray, sampler) -> S
     walk = Walk(scene, lanes, sampler, settings.camera_roulette, CAMERA_VERTEX)
     growth = _Growth(settings, walk, settings.light_roulette, recorder, record, count)
     growth.escapes = scene.lights.environment is not None
+    growth.limit = limit
     growth.run()
     settings.counters.rays += growth.walk.rays
     return recorder.flatten(count, growth.terminated)
 
 
-def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool) -> tuple[Subpaths, LensHits]:
-    """``count`` light subpaths, one per lane, from ``sampler``'s numbers: (subpaths, lens hits).
+def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool,
+                   limit: np.ndarray | None = None) -> tuple[Subpaths, LensHits]:
+    """``count`` light subpaths, one per lane, from ``sampler``'s numbers: (subpaths, lens hits); ``limit``:
+    the most vertices of each lane's subpath (besides ``settings.max_vertices``; vertex 0 is always made).
 
     Vertex 0 is on a light chosen by power, with the origin density of
     :meth:`pathspace.lights.LightSet.pdf_le` and throughput 1 / (pmf x
@@ -405,6 +416,7 @@ def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool) -
     walk = Walk(scene, lanes, sampler, settings.light_roulette, LIGHT_VERTEX, "importance")
     growth = _Growth(settings, walk, settings.camera_roulette, recorder, record, count)
     growth.lens_hits = [] if lens else None
+    growth.limit = limit
     growth.run()
     settings.counters.rays += growth.walk.rays
     return recorder.flatten(count, growth.terminated), LensHits.concatenate(growth.lens_hits or [], colours.channels)

@@ -154,6 +154,7 @@ class _Snapshots:
     def __init__(self, spec: EstimatorSpec, seed: int, reference: np.ndarray, metrics: tuple[str, ...],
                  keep_images: bool) -> None:
         self.spec, self.seed, self.reference, self.metrics, self.keep = spec, seed, reference, metrics, keep_images
+        self.independent_passes = spec.make().independent_passes   # else the film's variance is not the error
         self.rows: list[dict] = []
         self.images: dict = {}
         self.overhead = 0.0
@@ -169,7 +170,7 @@ class _Snapshots:
                "spp": film.passes, "seconds": seconds, "final": final}
         for name in self.metrics:
             row[name] = METRICS[name](image, self.reference)
-        if film.count.min() >= 2:
+        if film.count.min() >= 2 and self.independent_passes:
             predicted = predicted_relmse(image, film.image_variance(), film.count.reshape(film.height, film.width))
             row.update(predicted_relmse=predicted.relmse, predicted_low=predicted.low, predicted_high=predicted.high)
         if self.keep:

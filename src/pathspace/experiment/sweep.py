@@ -16,6 +16,10 @@ confined to a region, but it trusts every block's variance estimate, which
 heavy-tailed estimators (caustics by path tracing at few samples) get wrong,
 so it is information, not the flag.  The estimator's and the renders'
 warnings (infinite-variance roulette, ...) are collected per cell.
+Markov-chain estimators (MLT) report no per-render variance (their passes
+are correlated): their pooled error is the spread of the seeds' images
+(two seeds or more; with one, the cell is not tested), and their per-render
+variance columns are NaN.
 """
 from __future__ import annotations
 
@@ -111,7 +115,14 @@ def _pooled(results: list, reference: np.ndarray, reference_variance: np.ndarray
     from scipy import stats
 
     image = np.mean([r.image for r in results], axis=0)
-    variance = np.mean([r.variance for r in results], axis=0) / len(results)
+    if all(np.isnan(r.variance).all() for r in results):   # Markov chains: the spread over the seeds
+        variance = (np.var([r.image for r in results], axis=0, ddof=1) / len(results) if len(results) > 1
+                    else np.full(image.shape, np.inf))
+    else:
+        variance = np.mean([r.variance for r in results], axis=0) / len(results)
+    if not np.isfinite(variance).all():   # a Markov chain run with one seed: no error estimate
+        return {"pooled_mean": float(image.mean()), "reference_mean": float(reference.mean()), "mean_z": np.nan,
+                "biased": None, "blocks_agree": None, "max_abs_z": np.nan}
     blocks = compare_estimates(image, variance, reference, reference_variance, block=block, alpha=alpha)
     error = np.sqrt(variance.sum() + reference_variance.sum()) / image.size
     difference = image.mean() - reference.mean()

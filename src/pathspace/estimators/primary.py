@@ -1,0 +1,297 @@
+"""Primary sample space for Metropolis chains: states of uniform numbers, mutated lazily (Kelemen et al. 2002).
+
+A chain's state is an infinite vector of numbers in [0, 1) per random
+stream (camera, light, ...): the numbers an estimator draws, in the order
+it draws them.  A *proposal* either replaces the whole vector by fresh
+uniforms (a large step) or moves every number by a small symmetric step on
+the circle [0, 1) (a small step).  Both are symmetric, T(x -> y) = T(y -> x),
+so the acceptance is min(1, f(y) / f(x)).
+
+Numbers are materialised lazily, as pbrt-v3's MLTSampler does: a number
+is brought up to date only when the proposal draws it.  Each number keeps the
+count of accepted proposals (``stamp``) when it was last brought up to date;
+since then, every accepted small step would have moved it by one step and an
+accepted large step would have replaced it.  Those moves never influenced
+anything (the number was not used), so bringing it up to date draws them now:
+the sum of n independent steps (exact for both kernels: a Gaussian of
+sigma sqrt(n), or n exponential steps summed), or a fresh uniform after a
+large step.  This is exactly the chain that mutates every number at every
+step, at the cost of the numbers used.
+
+:class:`ChainStates` holds the chains' numbers of one stream; a
+:class:`PrimarySampler` serves a proposal's numbers to an estimator through
+the :class:`~pathspace.sampler.Sampler` protocol, so any estimator with an
+``evaluate`` on given numbers (PT, BDPT) runs on a chain's proposal unchanged.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Callable
+
+import numpy as np
+
+__all__ = ["SmallStep", "ChainStates", "PrimarySampler", "KERNELS", "Uniforms", "new_counters", "advance", "film_position"]
+
+KERNELS = ("exponential", "gaussian")
+Uniforms = Callable[[int], np.ndarray]  # k -> k uniform numbers in [0, 1) (float64)
+
+
+def _wrap(x: np.ndarray) -> np.ndarray:
+    """x mod 1 in [0, 1) (a value rounding up to 1.0 becomes 0.0)."""
+    y = x - np.floor(x)
+    return np.where(y >= 1.0, 0.0, y)
+
+
+@dataclass(frozen=True)
+class SmallStep:
+    """A symmetric small step on the circle [0, 1).
+
+    ``"exponential"`` (Kelemen et al. 2002, sec. 4.2): |step| = s2 exp(-log(s2/s1) u) for
+    uniform u, with a random sign, so |step| in [s1, s2] with density 1 / (|step| log(s2/s1)); ``size`` is
+    s2 and s1 = s2 / 16 (the paper's 1/1024 and 1/64).  ``"gaussian"`` (pbrt-v3): a normal step of
+    standard deviation ``size``.
+    """
+
+    kernel: str = "exponential"
+    size: float = 1.0 / 64.0
+
+    def __post_init__(self) -> None:
+        if self.kernel not in KERNELS:
+            raise ValueError(f"small_step: expected one of {', '.join(KERNELS)}, got {self.kernel!r}")
+        if not (np.isfinite(self.size) and 0.0 < self.size <= 0.25):
+            raise ValueError(f"step_size: expected a number in (0, 0.25], got {self.size!r}")
+
+    @property
+    def smallest(self) -> float:
+        """s1 of the exponential kernel."""
+        return self.size / 16.0
+
+    def steps(self, count: np.ndarray, uniforms: Uniforms) -> np.ndarray:
+        """The sum of ``count[i]`` independent steps for every i (0 for a count of 0), float64."""
+        count = np.asarray(count, dtype=np.int64)
+        out = np.zeros(count.size)
+        moved = np.flatnonzero(count > 0)
+        if not moved.size:
+            return out
+        n = count.take(moved)
+        if self.kernel == "gaussian":
+            u = uniforms(2 * moved.size).reshape(2, -1)
+            normal = np.sqrt(-2.0 * np.log1p(-u[0])) * np.cos(2.0 * np.pi * u[1])  # Box-Muller
+            out[moved] = self.size * np.sqrt(n) * normal
+            return out
+        total = int(n.sum())
+        u = uniforms(2 * total).reshape(2, -1)
+        single = self.size * np.exp(-np.log(16.0) * u[0]) * np.where(u[1] < 0.5, -1.0, 1.0)
+        out[moved] = single if total == moved.size else np.add.reduceat(single, np.cumsum(n) - n)
+        return out
+
+    def pdf(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """Density of one step from ``x`` to ``y`` on the circle (per coordinate; symmetric in x and y)."""
+        d = np.asarray(y, dtype=np.float64) - np.asarray(x, dtype=np.float64)
+        if self.kernel == "gaussian":
+            shifts = np.arange(-4, 5)[:, None]   # the wrapped normal: the images of d on the line
+            z = (d.reshape(1, -1) + shifts) / self.size
+            return (np.exp(-0.5 * z * z).sum(axis=0) / (self.size * np.sqrt(2.0 * np.pi))).reshape(d.shape)
+        a = np.abs(d - np.round(d))              # distance on the circle (s2 <= 1/4: one image only)
+        with np.errstate(divide="ignore"):
+            return np.where((a >= self.smallest) & (a <= self.size), 0.5 / (a * np.log(16.0)), 0.0)
+
+
+class ChainStates:
+    """The numbers of one random stream of ``chains`` Markov chains, and the proposal being evaluated.
+
+    Per chain: ``accepted`` (proposals accepted so far) and ``last_large``
+    (the count when the last accepted large step was accepted); per number:
+    ``current`` (its value, up to date at ``stamp`` accepted proposals; -1:
+    never drawn) and ``proposal`` (NaN until the proposal draws it).  With
+    ``replay`` set, the proposal is the current state (numbers not drawn
+    before are drawn for both).
+    The chains' counters are shared by all streams of the chains: pass the
+    same ``counters`` dict to each stream's ChainStates.
+    """
+
+    def __init__(self, chains: int, step: SmallStep, uniforms: Uniforms, counters: dict[str, np.ndarray] | None = None,
+                 width: int = 16) -> None:
+        self.step, self.uniforms = step, uniforms
+        self.counters = counters if counters is not None else new_counters(chains)
+        # Numbers are stored number by number: (width, chains), so that a wavefront drawing number j of its
+        # lanes reads one contiguous row; flat index = j * chains + chain, unchanged when the width grows.
+        self.current = np.zeros((width, chains))
+        self.stamp = np.full((width, chains), -1, dtype=np.int64)
+        self.proposal = np.full((width, chains), np.nan)
+        self.drawn: list[np.ndarray] = []   # flat indices of the numbers the proposal has drawn
+        self.replay = False   # True: the "proposal" is the current state itself (to evaluate a chain's start)
+
+    @property
+    def chains(self) -> int:
+        """Number of chains."""
+        return self.current.shape[1]
+
+    @property
+    def width(self) -> int:
+        """Numbers per chain stored so far."""
+        return self.current.shape[0]
+
+    def _grow(self, width: int) -> None:
+        extra = max(width - self.width, 16)
+        self.current = np.concatenate([self.current, np.zeros((extra, self.chains))])
+        self.stamp = np.concatenate([self.stamp, np.full((extra, self.chains), -1, np.int64)])
+        self.proposal = np.concatenate([self.proposal, np.full((extra, self.chains), np.nan)])
+
+    def fetch(self, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
+        """The proposal's numbers ``columns`` of chains ``rows`` (same shapes), drawing those not drawn yet."""
+        if int(columns.max(initial=-1)) >= self.width:
+            self._grow(int(columns.max()) + 1)
+        flat = columns * self.chains + rows
+        proposal = self.proposal.reshape(-1)
+        u = proposal.take(flat)
+        missing = np.flatnonzero(np.isnan(u))
+        if missing.size:
+            where = flat.take(missing)
+            drawn = self._propose(rows.take(missing), where)
+            u[missing] = drawn
+            proposal.put(where, drawn)
+            self.drawn.append(where)
+        return u
+
+    def _propose(self, r: np.ndarray, flat: np.ndarray) -> np.ndarray:
+        """Bring the current numbers of chains ``r`` at ``flat`` (indices into the (width, chains) arrays) up to
+        date (see the module docstring), then propose from them."""
+        accepted, last_large = self.counters["accepted"].take(r), self.counters["last_large"].take(r)
+        stamp, current = self.stamp.reshape(-1).take(flat), self.current.reshape(-1).take(flat)
+        fresh = np.flatnonzero(stamp < last_large)      # replaced by an accepted large step since (or never drawn)
+        if fresh.size:
+            current[fresh] = self.uniforms(fresh.size)
+            stamp[fresh] = accepted.take(fresh)
+        lagging = np.flatnonzero(stamp < accepted)     # accepted small steps since it was last brought up to date
+        if lagging.size:
+            moved = current.take(lagging) + self.step.steps(accepted.take(lagging) - stamp.take(lagging), self.uniforms)
+            current[lagging] = _wrap(moved)
+        self.current.reshape(-1).put(flat, current)
+        self.stamp.reshape(-1).put(flat, accepted)
+        if self.replay:
+            return current
+        large = self.counters["large"].take(r)
+        if not large.any():
+            return _wrap(current + self.step.steps(np.ones(r.size, np.int64), self.uniforms))
+        proposed = np.empty(r.size)
+        k = np.flatnonzero(large)
+        proposed[k] = self.uniforms(k.size)
+        k = np.flatnonzero(~large)
+        proposed[k] = _wrap(current.take(k) + self.step.steps(np.ones(k.size, np.int64), self.uniforms))
+        return proposed
+
+    def settle(self, accept: np.ndarray) -> None:
+        """End the proposal: the chains ``accept`` (bool per chain) take its numbers, the others keep theirs.
+        Call once per stream, then :func:`advance` the shared counters once."""
+        if self.drawn:
+            flat = np.concatenate(self.drawn)
+            taken = flat.take(np.flatnonzero(accept.take(flat % self.chains)))
+            proposal = self.proposal.reshape(-1)
+            self.current.reshape(-1).put(taken, proposal.take(taken))
+            self.stamp.reshape(-1).put(taken, self.counters["accepted"].take(taken % self.chains) + 1)
+            proposal.put(flat, np.nan)
+        self.drawn = []
+
+    def load(self, rows: np.ndarray, numbers: np.ndarray) -> None:
+        """Start chains ``rows`` at the given numbers ((k, dims), NaN: never drawn) with fresh counters."""
+        if numbers.shape[1] > self.width:
+            self._grow(numbers.shape[1])
+        width = numbers.shape[1]
+        drawn = ~np.isnan(numbers.T)
+        self.current[:, rows] = 0.0
+        self.current[:width, rows] = np.where(drawn, numbers.T, 0.0)
+        self.stamp[:, rows] = -1
+        self.stamp[:width, rows] = np.where(drawn, 0, -1)
+        self.proposal[:, rows] = np.nan
+        for name in ("accepted", "last_large"):
+            self.counters[name][rows] = 0
+
+    def numbers(self, rows: np.ndarray, proposal: bool = False) -> np.ndarray:
+        """(k, width) numbers of chains ``rows``: their current state (as last brought up to date), or the
+        proposal's (NaN where it has drawn nothing)."""
+        return (self.proposal if proposal else self.current)[:, rows].T
+
+    def set_proposal(self, column: int, values: np.ndarray) -> None:
+        """Set number ``column`` of every chain's proposal (e.g. film positions chosen by the bootstrap)."""
+        if column >= self.width:
+            self._grow(column + 1)
+        self.proposal[column] = values
+
+    def sampler(self, rows: np.ndarray, film: tuple[int, int] | None = None) -> "PrimarySampler":
+        """A sampler serving the proposal's numbers to the lanes of chains ``rows``."""
+        return PrimarySampler(self, np.asarray(rows, dtype=np.int64), film)
+
+
+def new_counters(chains: int) -> dict[str, np.ndarray]:
+    """Counters a chain's streams share: accepted proposals, the count at the last accepted large step, and
+    whether the current proposal is a large step."""
+    return {"accepted": np.zeros(chains, np.int64), "last_large": np.zeros(chains, np.int64),
+            "large": np.zeros(chains, bool)}
+
+
+def advance(counters: dict[str, np.ndarray], accept: np.ndarray) -> None:
+    """Count the accepted proposals (after every stream has :meth:`ChainStates.settle` d)."""
+    counters["accepted"] += accept
+    taken_large = accept & counters["large"]
+    counters["last_large"][taken_large] = counters["accepted"][taken_large]
+
+
+def film_position(u: np.ndarray, film: tuple[int, int]) -> np.ndarray:
+    """The pixel index (N,) of film coordinates ``u`` (2, N) in [0, 1)^2 over a ``film`` = (width, height)
+    image (the position inside the pixel is what :class:`PrimarySampler` serves in their place)."""
+    width, height = film
+    ix = np.minimum(np.floor(u[0] * width), width - 1)
+    iy = np.minimum(np.floor(u[1] * height), height - 1)
+    return (iy * width + ix).astype(np.int64)
+
+
+class PrimarySampler:
+    """The :class:`~pathspace.sampler.Sampler` of a proposal: lane j draws chain ``rows[j]``'s numbers in order.
+
+    With ``film`` = (width, height), the first two numbers of every lane are
+    film coordinates over the whole image, and the sampler serves the
+    position inside the lane's pixel instead (see :func:`film_position`).
+    """
+
+    def __init__(self, states: ChainStates, rows: np.ndarray, film: tuple[int, int] | None = None) -> None:
+        self.states, self.row, self.film = states, rows, film
+        self.cursor = np.zeros(rows.size, dtype=np.int64)
+
+    @property
+    def lanes(self) -> int:
+        """Number of live lanes."""
+        return int(self.row.size)
+
+    def draw(self, k: int) -> np.ndarray:
+        """The next k numbers of every live lane, (k, lanes)."""
+        columns = self.cursor[None, :] + np.arange(k)[:, None]
+        rows = np.broadcast_to(self.row[None, :], columns.shape)
+        u = self.states.fetch(rows.ravel(), columns.ravel()).reshape(columns.shape)
+        if self.film is not None:
+            first = columns < 2
+            if first.any():
+                scaled = u * np.where(columns == 0, self.film[0], self.film[1])
+                u = np.where(first, scaled - np.floor(scaled), u)
+        self.cursor += k
+        return u
+
+    def keep(self, indices: np.ndarray) -> None:
+        """Keep the lanes ``indices``."""
+        self.row, self.cursor = self.row.take(indices), self.cursor.take(indices)
+
+    def split(self, indices: np.ndarray) -> "PrimarySampler":
+        """The lanes ``indices`` leave, with their chains and positions."""
+        part = PrimarySampler(self.states, self.row.take(indices), self.film)
+        part.cursor = self.cursor.take(indices)
+        rest = np.ones(self.row.size, dtype=bool)
+        rest[indices] = False
+        self.row, self.cursor = self.row[rest], self.cursor[rest]
+        return part
+
+    def extend(self, other: "PrimarySampler") -> None:
+        """Append the lanes of ``other`` (a sampler of the same chains)."""
+        if other.states is not self.states:
+            raise ValueError("only samplers of the same chain states can be joined")
+        self.row = np.concatenate([self.row, other.row])
+        self.cursor = np.concatenate([self.cursor, other.cursor])

@@ -1,0 +1,224 @@
+"""The Metropolis kernel in primary sample space, tested on known targets.
+
+* Each small-step kernel samples the density it states (chi-square), and n steps drawn at once (lazy
+  catch-up) are distributed as n single steps (two-sample Kolmogorov-Smirnov).
+* Detailed balance f(x) T(x->y) a(x->y) = f(y) T(y->x) a(y->x) holds on sampled pairs of every mutation.
+* Chains on a 2D target with a discontinuity, a peak and a number drawn only in half of the domain (lazy
+  numbers) reproduce it (chi-square of the chains' states; each mutation alone and mixed), and so does
+  the marginal of the lazily drawn number.
+* The expected-value splats of the chains estimate the target's integral over each pixel.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from pathspace.estimators.base import Counters
+from pathspace.estimators.bootstrap import bootstrap
+from pathspace.estimators.metropolis import Chains, Proposal, Target
+from pathspace.estimators.primary import ChainStates, SmallStep, advance, film_position, new_counters
+
+ALPHA = 1e-3
+STEPS = [SmallStep("exponential", 1 / 64), SmallStep("exponential", 0.2), SmallStep("gaussian", 0.01),
+         SmallStep("gaussian", 0.2)]
+
+
+def uniforms_of(seed: int):
+    rng = np.random.default_rng(seed)
+    return lambda k: rng.random(k)
+
+
+def _wrap(x):
+    return x - np.floor(x)
+
+
+@pytest.mark.parametrize("step", STEPS, ids=lambda s: f"{s.kernel}-{s.size:g}")
+@pytest.mark.parametrize("start", [0.5, 0.003])
+def test_small_step_samples_its_density(step, start):
+    n, bins, sub = 200_000, 400, 200
+    y = _wrap(start + step.steps(np.ones(n, np.int64), uniforms_of(1)))
+    fine = (np.arange(bins * sub) + 0.5) / (bins * sub)
+    mass = step.pdf(np.full(fine.size, start), fine).reshape(bins, sub).mean(axis=1) / bins
+    assert mass.sum() == pytest.approx(1.0, abs=2e-3)          # the stated density integrates to 1
+    observed = np.histogram(y, np.linspace(0.0, 1.0, bins + 1))[0]
+    keep = mass * n >= 5
+    assert observed[~keep].sum() <= 3 * mass[~keep].sum() * n + 10
+    chi2, p = stats.chisquare(observed[keep], mass[keep] / mass[keep].sum() * observed[keep].sum())
+    assert p > ALPHA, (chi2, p)
+
+
+@pytest.mark.parametrize("step", STEPS, ids=lambda s: f"{s.kernel}-{s.size:g}")
+def test_catch_up_is_n_single_steps(step):
+    n, count = 50_000, 7
+    at_once = _wrap(0.5 + step.steps(np.full(n, count, np.int64), uniforms_of(2)))
+    uniforms = uniforms_of(3)
+    one_by_one = np.full(n, 0.5)
+    for _ in range(count):
+        one_by_one = _wrap(one_by_one + step.steps(np.ones(n, np.int64), uniforms))
+    assert stats.ks_2samp(at_once, one_by_one).pvalue > ALPHA
+
+
+def test_steps_of_count_zero_do_not_move():
+    step = SmallStep("exponential", 1 / 64)
+    assert np.all(step.steps(np.zeros(5, np.int64), uniforms_of(0)) == 0.0)
+
+
+# -- a 2D target with a lazily drawn third number ------------------------------------------------------
+
+FILM = (8, 8)
+
+
+def density(u0, u1):
+    """The target's marginal over (u0, u1): a floor, a peak and a step (edges on 1/16 bins)."""
+    peak = 5.0 * np.exp(-((u0 - 0.3) ** 2 + (u1 - 0.65) ** 2) / (2 * 0.08 ** 2))
+    return 0.2 + peak + 2.0 * ((u0 >= 0.75) & (u1 < 0.25))
+
+
+class Toy(Target):
+    """f(u) = density(u0, u1), times (0.5 + u2) where u0 < 0.5 (u2 is drawn only there): its marginal over
+    (u0, u1) is ``density``, and u2's conditional density where it is drawn is 0.5 + u2."""
+
+    streams = ("camera",)
+    film = FILM
+
+    def evaluate(self, states, rows, labels, counters):
+        s = states["camera"]
+        u = s.fetch(np.repeat(rows, 2), np.tile(np.arange(2), rows.size)).reshape(-1, 2).T
+        f = density(u[0], u[1])
+        lazy = np.flatnonzero(u[0] < 0.5)
+        f[lazy] *= 0.5 + s.fetch(rows.take(lazy), np.full(lazy.size, 2))
+        return Proposal(np.arange(rows.size), film_position(u, FILM), np.repeat(f[None, :], 3, axis=0))
+
+
+def run_toy(step: SmallStep, p_large: float, chains: int, steps: int, seed: int):
+    uniforms = uniforms_of(seed)
+    contribution = lambda values: values[1]   # noqa: E731
+    boot = bootstrap(Toy(), 1 << 16, chains, contribution, step, uniforms, 3, Counters(), lambda: None)
+    pixels = FILM[0] * FILM[1]
+    chain = Chains(Toy(), contribution, step, p_large, uniforms, boot.label,
+                   np.full(chains, pixels * boot.brightness[0] / chains), pixels, 3)
+    chain.start(boot.numbers, Counters())
+    image = np.zeros((3, pixels))
+    for _ in range(steps):
+        chain.step_all(image, Counters())
+    chain.flush(image)
+    return chain, image / steps, boot
+
+
+def bin_masses(bins: int) -> np.ndarray:
+    sub = 32
+    grid = (np.arange(bins * sub) + 0.5) / (bins * sub)
+    u0, u1 = np.meshgrid(grid, grid, indexing="ij")
+    values = density(u0, u1).reshape(bins, sub, bins, sub).mean(axis=(1, 3))
+    return values / values.sum()
+
+
+MUTATIONS = [("small-exponential", SmallStep("exponential", 1 / 16), 0.0),
+             ("small-gaussian", SmallStep("gaussian", 0.05), 0.0),
+             ("large", SmallStep("exponential", 1 / 16), 1.0),
+             ("mixture", SmallStep("exponential", 1 / 64), 0.3)]
+
+
+@pytest.mark.parametrize("name,step,p_large", MUTATIONS, ids=[m[0] for m in MUTATIONS])
+def test_chains_reproduce_a_2d_target(name, step, p_large):
+    chains = 20_000
+    chain, image, boot = run_toy(step, p_large, chains, 40, seed=5)
+    u = chain.states["camera"].numbers(np.arange(chains))[:, :3]
+    bins = 16
+    observed = np.histogram2d(u[:, 0], u[:, 1], bins=bins, range=[[0, 1], [0, 1]])[0].ravel()
+    expected = bin_masses(bins).ravel() * chains
+    chi2, p = stats.chisquare(observed, expected)
+    assert p > ALPHA / len(MUTATIONS), (chi2, p)
+    # The lazily drawn number, where the chains' states use it: density 0.5 + u2.
+    lazy = u[u[:, 0] < 0.5, 2]
+    edges = np.linspace(0, 1, 11)
+    expected_lazy = (0.5 * np.diff(edges) + 0.5 * np.diff(edges ** 2)) * lazy.size
+    chi2, p = stats.chisquare(np.histogram(lazy, edges)[0], expected_lazy)
+    assert p > ALPHA / len(MUTATIONS), (chi2, p)
+
+
+def test_splats_estimate_the_pixel_integrals():
+    """The image is P b E[V/f]: here each pixel's mean of the density (its integral times P)."""
+    step = SmallStep("exponential", 1 / 16)
+    images = np.stack([run_toy(step, 0.3, 4096, 64, seed=seed)[1][1] for seed in range(8)])
+    mean, error = images.mean(axis=0), images.std(axis=0, ddof=1) / np.sqrt(images.shape[0])
+    pixels = FILM[0] * FILM[1]
+    truth = bin_masses(8).T.ravel() * pixels * density_integral()   # pixel index = row (u1) * width + column (u0)
+    z = (mean - truth) / error
+    critical = stats.t.isf(ALPHA / (2 * pixels), images.shape[0] - 1)
+    assert np.abs(z).max() < critical, np.abs(z).max()
+
+
+def density_integral() -> float:
+    grid = (np.arange(1024) + 0.5) / 1024
+    u0, u1 = np.meshgrid(grid, grid, indexing="ij")
+    return float(density(u0, u1).mean())
+
+
+@pytest.mark.parametrize("step", STEPS[:3], ids=lambda s: f"{s.kernel}-{s.size:g}")
+@pytest.mark.parametrize("large", [False, True])
+def test_detailed_balance_on_sampled_pairs(step, large):
+    """f(x) T(x->y) a(x->y) = f(y) T(y->x) a(y->x) for proposals y of states x, with T the product of the
+    per-number step densities (a large step: T = 1 both ways); every proposal lies in T's support."""
+    n, dims = 5000, 4
+    uniforms = uniforms_of(7)
+    counters = new_counters(n)
+    states = ChainStates(n, step, uniforms, counters)
+    states.load(np.arange(n), uniforms(n * dims).reshape(n, dims))
+    counters["large"][:] = large
+    rows, columns = np.repeat(np.arange(n), dims), np.tile(np.arange(dims), n)
+    y = states.fetch(rows, columns).reshape(n, dims)
+    x = states.numbers(np.arange(n))[:, :dims]
+
+    def f(u):
+        return density(u[:, 0], u[:, 1]) * (0.5 + u[:, 2]) * (1.0 + u[:, 3] ** 2)
+
+    def transition(a, b):
+        return np.ones(n) if large else np.prod(step.pdf(a, b), axis=1)
+
+    forward, backward = transition(x, y), transition(y, x)
+    assert np.all(forward > 0)
+    accept_fwd, accept_back = np.minimum(1, f(y) / f(x)), np.minimum(1, f(x) / f(y))
+    np.testing.assert_allclose(f(x) * forward * accept_fwd, f(y) * backward * accept_back, rtol=1e-12)
+
+
+def test_rejected_proposals_keep_the_state_and_accepted_ones_take_it():
+    n = 64
+    uniforms = uniforms_of(11)
+    counters = new_counters(n)
+    states = ChainStates(n, SmallStep(), uniforms, counters)
+    start = uniforms(n * 3).reshape(n, 3)
+    states.load(np.arange(n), start)
+    y = states.fetch(np.repeat(np.arange(n), 3), np.tile(np.arange(3), n)).reshape(n, 3)
+    accept = np.arange(n) % 2 == 0
+    states.settle(accept)
+    advance(counters, accept)
+    current = states.numbers(np.arange(n))[:, :3]
+    np.testing.assert_array_equal(current[accept], y[accept])
+    np.testing.assert_array_equal(current[~accept], start[~accept])
+    assert np.all(np.isnan(states.numbers(np.arange(n), proposal=True)))
+
+
+class Broken(Toy):
+    """The toy target with a NaN in every seventh lane's contribution."""
+
+    def evaluate(self, states, rows, labels, counters):
+        proposal = super().evaluate(states, rows, labels, counters)
+        proposal.value[:, ::7] = np.nan
+        return proposal
+
+
+def test_nonfinite_contributions_are_dropped_and_counted():
+    uniforms, step, counters = uniforms_of(13), SmallStep(), Counters()
+    contribution = lambda values: values[1]   # noqa: E731
+    boot = bootstrap(Broken(), 4096, 256, contribution, step, uniforms, 3, counters, lambda: None)
+    chain = Chains(Broken(), contribution, step, 0.3, uniforms, boot.label, np.ones(256), 64, 3)
+    chain.start(boot.numbers, counters)
+    image = np.zeros((3, 64))
+    for _ in range(5):
+        chain.step_all(image, counters)
+    chain.flush(image)
+    assert np.isfinite(image).all() and image.sum() > 0
+    assert np.isfinite(boot.brightness).all()
+    assert counters.nonfinite_contributions >= (4096 + 6 * 256) // 7
