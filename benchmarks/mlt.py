@@ -1,4 +1,4 @@
-"""Metropolis benchmark: time to a relMSE target for PT, BDPT, PSSMLT (over PT and BDPT) and MMLT.
+"""Metropolis benchmark: time to a relMSE target for PT, BDPT, PSSMLT (over PT and BDPT), MMLT and path-space MLT.
 
 Measured in one run (the machine is shared; only ratios within a run mean much), per scene (the caustic
 seen through glass and the ajar door, both 128x128; every estimator at the same ``max_depth``):
@@ -26,7 +26,7 @@ from pathspace.metrics import RELMSE_EPSILON, relmse
 
 ROOT = Path(__file__).resolve().parent.parent
 ESTIMATORS = {"pt": ("pt", {}), "bdpt": ("bdpt", {}), "pssmlt-pt": ("pssmlt", {}),
-              "pssmlt-bdpt": ("pssmlt", {"over": "bdpt"}), "mmlt": ("mmlt", {})}
+              "pssmlt-bdpt": ("pssmlt", {"over": "bdpt"}), "mmlt": ("mmlt", {}), "mlt": ("mlt", {})}
 
 
 def rel_mse(result, reference) -> float:
@@ -59,7 +59,7 @@ def mutation_rate(threads: int, seconds: float) -> None:
     bdpt = ps.render(scene, "bdpt", time=seconds, seed=1, max_depth=16, threads=threads)
     rate = bdpt.stats["samples_per_second"]
     print(f"\nCornell box 128x128, {threads} threads: BDPT {rate / 1e3:.1f} k samples/s")
-    for name in ("pssmlt-pt", "pssmlt-bdpt", "mmlt"):
+    for name in ("pssmlt-pt", "pssmlt-bdpt", "mmlt", "mlt"):
         estimator, params = ESTIMATORS[name]
         result = ps.render(scene, estimator, time=seconds, seed=1, max_depth=16, threads=threads, **params)
         m = result.stats["metropolis"]
@@ -89,9 +89,9 @@ def main() -> None:
         for r in rows:
             extra = ""
             if "mutations_per_second" in r:
-                extra = (f"  {r['mutations_per_second'] / 1e3:.0f} k mut/s, acceptance small "
-                         f"{r['acceptance']['small']:.2f} large {r['acceptance']['large']:.2f}, longest rejection "
-                         f"run {r['longest_rejection_run']}, b error {r['brightness_error']:.2%}")
+                acceptance = " ".join(f"{kind} {rate:.2f}" for kind, rate in r["acceptance"].items() if rate is not None)
+                extra = (f"  {r['mutations_per_second'] / 1e3:.0f} k mut/s, acceptance {acceptance}, longest "
+                         f"rejection run {r['longest_rejection_run']}, b error {r['brightness_error']:.2%}")
             print(f"  {r['name']:12s} {r['relmse']:9.4f} {r['relmse_short']:9.4f} {r['slope']:6.2f} "
                   f"{r['time_to_target']:9.1f}s {r['time_to_target'] / base:8.2f}{extra}")
     mutation_rate(args.threads, args.time / 2)

@@ -53,6 +53,10 @@ def _tune_allocator() -> None:
     _allocator_tuned = True
 
 
+# What a Metropolis render's b (stats["metropolis"]["brightness"]) is the mean of, per ``contribution``.
+_CONTRIBUTION_LABELS = {"luminance": " (luminance)", "xyz": " (X+Y+Z)", "max": " (max channel)"}
+
+
 @dataclass
 class RenderResult:
     """A finished render.
@@ -117,8 +121,12 @@ class RenderResult:
                 f"{s['threads']} threads)")
         if "metropolis" in s and "mutations" in s["metropolis"]:
             m = s["metropolis"]
+            # b is the mean of the scalar the chains sample, which is the image's brightness only for luminance.
+            kind = _CONTRIBUTION_LABELS.get((s.get("params") or {}).get("contribution"), "")
+            if m.get("direct"):   # path-space MLT: the chains render the paths longer than BDPT's direct part
+                kind += f" of paths over {m['direct']} segments"
             text += (f"; Metropolis: {m['chains']} chains, {m['mutations_per_second'] / 1e6:.3f} M mutations/s, "
-                     f"brightness {m['brightness']:.6g} +- {m['brightness_standard_error']:.2g} "
+                     f"mean contribution b{kind} {m['brightness']:.6g} +- {m['brightness_standard_error']:.2g} "
                      f"(bootstrap {m['bootstrap']}), longest rejection run {m['longest_rejection_run']}")
         if s["nonfinite"]:
             text += f"; {s['nonfinite']} non-finite samples were dropped"

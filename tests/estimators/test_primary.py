@@ -2,6 +2,8 @@
 
 * Each small-step kernel samples the density it states (chi-square), and n steps drawn at once (lazy
   catch-up) are distributed as n single steps (two-sample Kolmogorov-Smirnov).
+* A catch-up of many steps: past the step size's limit (where the sum modulo 1 is within 1e-12 of
+  uniform, from the kernel's Fourier coefficients) one uniform; longer ones summed in bounded chunks.
 * Detailed balance f(x) T(x->y) a(x->y) = f(y) T(y->x) a(y->x) holds on sampled pairs of every mutation.
 * Chains on a 2D target with a discontinuity, a peak and a number drawn only in half of the domain (lazy
   numbers) reproduce it (chi-square of the chains' states; each mutation alone and mixed), and so does
@@ -12,12 +14,14 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import stats
+from scipy import special, stats
 
 from pathspace.estimators.base import Counters
 from pathspace.estimators.bootstrap import bootstrap
 from pathspace.estimators.metropolis import Chains, Proposal, Target
-from pathspace.estimators.primary import ChainStates, SmallStep, advance, film_position, new_counters
+from pathspace.estimators import primary
+from pathspace.estimators.primary import (ChainStates, SmallStep, advance, exponential_catch_up_limit,
+                                         film_position, new_counters)
 
 ALPHA = 1e-3
 STEPS = [SmallStep("exponential", 1 / 64), SmallStep("exponential", 0.2), SmallStep("gaussian", 0.01),
@@ -57,6 +61,108 @@ def test_catch_up_is_n_single_steps(step):
     for _ in range(count):
         one_by_one = _wrap(one_by_one + step.steps(np.ones(n, np.int64), uniforms))
     assert stats.ks_2samp(at_once, one_by_one).pvalue > ALPHA
+
+
+def counting(seed: int):
+    """A uniform source that counts the numbers it has drawn (``source.drawn``)."""
+    rng = np.random.default_rng(seed)
+
+    def source(k):
+        source.drawn += k
+        return rng.random(k)
+
+    source.drawn = 0
+    return source
+
+
+def g(x):
+    """phi(2 pi k) of the exponential kernel of size s2 = x / k: E[cos(2 pi x 16^-v)], v uniform."""
+    return (special.sici(2 * np.pi * x)[1] - special.sici(2 * np.pi * x / 16)[1]) / np.log(16.0)
+
+
+LIMITS = {0.25: 125, 1 / 16: 2042, 1 / 64: 33497, 0.01: 82416, 1e-3: 8567570}
+
+
+@pytest.mark.parametrize("size", [0.25, 0.2, 0.1, 1 / 16, 1 / 32, 1 / 64, 0.01, 3e-3, 1e-3])
+def test_catch_up_limit_makes_the_wrapped_sum_uniform(size):
+    """At the limit, the sum of n exponential steps modulo 1 is within 1e-12 of uniform in total variation:
+    TV <= 1/2 (2 sum_k>=1 phi(2 pi k)^(2n))^(1/2), summed with the exact phi (k beyond K: |phi| <= 17 / (pi k
+    s2 log 16) < 1/4, negligible)."""
+    limit = exponential_catch_up_limit(size)
+    if size in LIMITS:
+        assert limit == LIMITS[size]
+    k = np.arange(1, int(np.ceil(4 * 17 / (np.pi * size * np.log(16.0)))) + 1)
+    phi = g(k * size)
+    assert np.abs(phi).max() == pytest.approx(g(size), rel=1e-12)   # rho is phi(2 pi)
+
+    def bound(n):
+        return 0.5 * np.sqrt(2 * np.sum(np.abs(phi) ** (2 * n)))
+
+    assert bound(limit) <= 1e-12
+    assert bound(int(0.8 * limit)) > 1e-12    # the limit is not wastefully large
+    # TV >= |phi(2 pi)|^n / 2 (a Fourier coefficient of density - 1 is at most 2 TV): a quarter of the limit
+    # is far from uniform, and a fixed 4096 steps is not enough from the default size 1/64 down.
+    assert abs(phi[0]) ** (limit // 4) / 2 > 2e-4
+    if size <= 1 / 64:
+        assert abs(phi[0]) ** 4096 / 2 > 0.01
+
+
+def test_rho_is_the_first_fourier_coefficient_for_every_step_size():
+    """The limit's proof: |g(x)| <= g(1/4) = 0.800 for x >= 1/4 (checked on [1/4, 2.5]; beyond, the bound
+    17 / (pi x log 16) < 0.8), and g decreases on (0, 1/4]."""
+    x = np.linspace(0.25, 2.5, 200_001)
+    assert g(0.25) == pytest.approx(0.800046, abs=1e-6)
+    assert np.abs(g(x[1:])).max() < g(0.25)
+    assert 17 / (np.pi * 2.5 * np.log(16.0)) < 0.8
+    small = np.geomspace(1e-6, 0.25, 1000)
+    assert np.all(np.diff(g(small)) < 0)
+
+
+def test_a_huge_lag_draws_one_uniform_and_is_uniform():
+    step = SmallStep()                                  # exponential, s2 = 1/64: the limit is 33497 steps
+    limit = int(step.catch_up_limit)
+    source = counting(4)
+    n = 100_000
+    y = _wrap(0.5 + step.steps(np.full(n, 10 ** 15, np.int64), source))
+    assert source.drawn == n
+    observed = np.histogram(y, np.linspace(0, 1, 101))[0]
+    assert stats.chisquare(observed).pvalue > ALPHA
+    source = counting(5)
+    step.steps(np.array([limit - 1, limit, 10 ** 18, 0, 3]), source)
+    assert source.drawn == 2 * (limit - 1) + 2 + 2 * 3
+    # In a chain: 20000 numbers that missed 10^9 accepted small steps are fetched with 3 uniforms each
+    # (one for the catch-up, two for the proposal's small step), and are uniform.
+    chains = 20_000
+    source = counting(6)
+    counters = new_counters(chains)
+    states = ChainStates(chains, step, source, counters)
+    states.load(np.arange(chains), np.full((chains, 1), 0.5))
+    counters["accepted"][:] = 10 ** 9
+    source.drawn = 0
+    states.fetch(np.arange(chains), np.zeros(chains, np.int64))
+    assert source.drawn == 3 * chains
+    current = states.numbers(np.arange(chains))[:, 0]
+    assert stats.chisquare(np.histogram(current, np.linspace(0, 1, 51))[0]).pvalue > ALPHA
+
+
+def test_chunked_catch_up_sums_each_numbers_own_steps(monkeypatch):
+    """Catch-ups longer than CATCH_UP_CHUNK steps are summed chunk by chunk (numbers' steps straddle chunks,
+    and one number spans several): every step is drawn once and added to its own number, in order."""
+    monkeypatch.setattr(primary, "CATCH_UP_CHUNK", 5)
+    step, rng, calls = SmallStep("exponential", 0.2), np.random.default_rng(8), []
+
+    def source(k):
+        calls.append(rng.random(k))
+        return calls[-1]
+
+    counts = np.array([7, 1, 12, 3, 0, 2, 9])
+    at_once = step.steps(counts, source)
+    assert [c.size for c in calls] == [10, 10, 10, 10, 10, 10, 8]       # 34 steps: 6 chunks of 5 and one of 4
+    u = np.concatenate([c.reshape(2, -1) for c in calls], axis=1)
+    single = 0.2 * 16.0 ** -u[0] * np.where(u[1] < 0.5, -1.0, 1.0)
+    ends = np.cumsum(counts)
+    expected = [single[end - count:end].sum() for count, end in zip(counts, ends)]
+    np.testing.assert_allclose(at_once, expected, rtol=1e-12, atol=1e-15)
 
 
 def test_steps_of_count_zero_do_not_move():

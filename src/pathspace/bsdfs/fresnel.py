@@ -25,12 +25,15 @@ def fresnel_dielectric(cos_i: np.ndarray, eta: np.ndarray) -> tuple[np.ndarray, 
 
 
 def fresnel_conductor(cos_i: np.ndarray, eta: np.ndarray, k: np.ndarray) -> np.ndarray:
-    """Reflectance (C, N) for cos_i (N,) in [0, 1] and complex index eta + i k (C, N)."""
-    cos_i = np.clip(cos_i, 0.0, 1.0)
+    """Reflectance (C, N) for cos_i (N,) in [0, 1] and complex index eta + i k (C, N).  Undefined inputs (NaN
+    cosines of failed samples, whose weight is zero anyway) and the 0 / 0 of grazing light on an index-matched
+    metal give 1, the grazing limit."""
+    cos_i = np.clip(np.nan_to_num(cos_i, nan=0.0), 0.0, 1.0)
     eta_c = eta + 1j * k
     sin2_i = 1.0 - cos_i * cos_i
     sin2_t = sin2_i / (eta_c * eta_c)
     cos_t = np.sqrt(1.0 - sin2_t)
-    r_parl = (eta_c * cos_i - cos_t) / (eta_c * cos_i + cos_t)
-    r_perp = (cos_i - eta_c * cos_t) / (cos_i + eta_c * cos_t)
-    return 0.5 * (np.abs(r_parl) ** 2 + np.abs(r_perp) ** 2)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        r_parl = (eta_c * cos_i - cos_t) / (eta_c * cos_i + cos_t)
+        r_perp = (cos_i - eta_c * cos_t) / (cos_i + eta_c * cos_t)
+    return np.nan_to_num(0.5 * (np.abs(r_parl) ** 2 + np.abs(r_perp) ** 2), nan=1.0)

@@ -14,6 +14,7 @@ import dataclasses
 from .base import Estimator
 from .bdpt import BDPT
 from .lt import LightTracer
+from .mlt import MLT
 from .mmlt import MMLT
 from .pssmlt import PSSMLT
 from .pt import PathTracer
@@ -21,7 +22,7 @@ from .pt import PathTracer
 __all__ = ["ESTIMATORS", "Estimator", "make_estimator"]
 
 ESTIMATORS: dict[str, type[Estimator]] = {"pt": PathTracer, "lt": LightTracer, "bdpt": BDPT, "pssmlt": PSSMLT,
-                                             "mmlt": MMLT}
+                                             "mmlt": MMLT, "mlt": MLT}
 
 
 def make_estimator(name: str, **params) -> Estimator:

@@ -30,7 +30,7 @@ import numpy as np
 from .base import Counters
 from .primary import ChainStates, SmallStep
 
-__all__ = ["BATCH", "GROUPS", "BootstrapResult", "Strata", "bootstrap"]
+__all__ = ["BATCH", "GROUPS", "BootstrapResult", "Strata", "allocate", "bootstrap", "reservoir_draw"]
 
 BATCH = 1 << 14   # bootstrap samples evaluated together
 GROUPS = 8        # independent replicates for the standard error
@@ -128,7 +128,7 @@ def bootstrap(target, samples: int, chains: int, contribution, step: SmallStep, 
 
 def _starts(target, picks: list[dict], brightness, standard_error, samples: int, chains: int) -> BootstrapResult:
     """Share the chains out among the classes and stack their starting numbers."""
-    per_class = _allocate(brightness, chains)
+    per_class = allocate(brightness, chains)
     numbers: dict[str, list[np.ndarray]] = {name: [] for name in target.streams}
     labels = []
     for label, count in enumerate(per_class):
@@ -144,18 +144,27 @@ def _starts(target, picks: list[dict], brightness, standard_error, samples: int,
                            np.concatenate(labels) if labels else np.zeros(0, np.int64))
 
 
-def _reservoir(reservoir: dict, f: np.ndarray, states: dict[str, ChainStates], slots: int, uniforms) -> None:
-    """Weighted reservoir sampling with replacement: each of ``slots`` slots holds one sample drawn with
-    probability proportional to f among all the samples seen so far (the batch's candidate replaces a slot
-    with probability batch total / running total)."""
+def reservoir_draw(reservoir: dict, f: np.ndarray, slots: int, uniforms) -> tuple[np.ndarray, np.ndarray] | None:
+    """One batch of weighted reservoir sampling with replacement: each of ``slots`` slots holds one sample drawn
+    with probability proportional to f among all the samples seen so far.  Returns each slot's candidate in this
+    batch (drawn in proportion to ``f``) and whether it replaces the slot's sample (with probability batch total
+    / running total ``reservoir["total"]``, updated here), or None if the batch weighs nothing."""
     total = float(f.sum())
     if total <= 0.0:
-        return
+        return None
     reservoir["total"] += total
     u = uniforms(2 * slots).reshape(2, slots)
     cdf = np.cumsum(f)
     candidate = np.minimum(np.searchsorted(cdf, u[0] * cdf[-1], side="right"), f.size - 1)
-    replace = u[1] < total / reservoir["total"]
+    return candidate, u[1] < total / reservoir["total"]
+
+
+def _reservoir(reservoir: dict, f: np.ndarray, states: dict[str, ChainStates], slots: int, uniforms) -> None:
+    """:func:`reservoir_draw` of the numbers of chain states ``states``."""
+    drawn = reservoir_draw(reservoir, f, slots, uniforms)
+    if drawn is None:
+        return
+    candidate, replace = drawn
     for name, s in states.items():
         chosen = s.numbers(candidate, proposal=True)
         held = reservoir["numbers"].get(name)
@@ -167,7 +176,7 @@ def _reservoir(reservoir: dict, f: np.ndarray, states: dict[str, ChainStates], s
         reservoir["numbers"][name] = np.where(replace[:, None], chosen, held)
 
 
-def _allocate(brightness: np.ndarray, chains: int) -> np.ndarray:
+def allocate(brightness: np.ndarray, chains: int) -> np.ndarray:
     """Chains per class: proportional to the brightness (largest remainders), at least one per bright class."""
     bright = brightness > 0
     if not bright.any():

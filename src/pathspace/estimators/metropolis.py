@@ -48,7 +48,7 @@ underestimates the error: estimate it from independent renders (seeds).
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from functools import partial
 from typing import Callable, ClassVar
 
@@ -60,7 +60,8 @@ from .bootstrap import bootstrap
 from .control import Interrupted
 from .primary import KERNELS, ChainStates, SmallStep, advance, new_counters
 
-__all__ = ["CONTRIBUTIONS", "Metropolis", "Proposal", "Target", "Chains", "contribution_function"]
+__all__ = ["CONTRIBUTIONS", "Metropolis", "Proposal", "Target", "Chains", "Splatting", "chain_statistics",
+           "contribution_function", "run_passes", "uniform_stream"]
 
 CONTRIBUTIONS = ("luminance", "xyz", "max")
 # Random streams of a render (the first number of each unit key); unit keys carry the class and batch.
@@ -107,36 +108,85 @@ def contribution_function(kind: str, mode) -> Callable[[np.ndarray], np.ndarray]
     return lambda values: np.abs(row @ values)
 
 
-@dataclass
-class Chains:
-    """Metropolis chains over a target's streams, with their current contributions and statistics.
+class Splatting:
+    """Expected-value splatting and the statistics of a wavefront of Markov chains (Veach 1997, sec. 11.4.2).
 
-    ``scale[i]``: what chain i's splats of one step are multiplied by (P b_c / chains of its class).
+    Each step splats a chain's proposal with weight a and adds 1 - a to the ``pending`` weight of its current
+    state, which reaches the film when the chain moves on (:meth:`flush`).  ``scale[i]``: what chain i's
+    splats of one step are multiplied by; ``f`` (chains,): the scalar contribution of the current states;
+    ``current``: their film contributions.
     """
 
-    target: Target
-    contribution: Callable[[np.ndarray], np.ndarray]
-    step: SmallStep
-    p_large: float
-    uniforms: Callable[[int], np.ndarray]
-    label: np.ndarray
-    scale: np.ndarray
-    pixels: int
-    channels: int
-    states: dict[str, ChainStates] = field(init=False)
-    counters: dict = field(init=False)
-
-    def __post_init__(self) -> None:
-        n = self.label.size
-        self.counters = new_counters(n)
-        self.states = {name: ChainStates(n, self.step, self.uniforms, self.counters) for name in self.target.streams}
+    def __init__(self, scale: np.ndarray, pixels: int, channels: int, kinds: tuple[str, ...]) -> None:
+        n = scale.size
+        self.scale, self.pixels, self.channels = scale, pixels, channels
         self.f = np.zeros(n)
-        self.pending = np.zeros(n)         # the current state's splat weight not yet on the film
-        self.current = Proposal(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((self.channels, 0)))
+        self.pending = np.zeros(n)          # the current state's splat weight not yet on the film
+        self.current = Proposal(np.zeros(0, np.int64), np.zeros(0, np.int64), np.zeros((channels, 0)))
         self.rejections = np.zeros(n, np.int64)
         self.longest_rejections = np.zeros(n, np.int64)
-        self.proposed = {"small": 0, "large": 0}
-        self.accepted = {"small": 0, "large": 0}
+        self.proposed = {kind: 0 for kind in kinds}
+        self.accepted = {kind: 0 for kind in kinds}
+
+    def propose(self, image: np.ndarray, proposal: Proposal, f_new: np.ndarray, accept_p: np.ndarray) -> None:
+        """Splat ``proposal`` (scalar contributions ``f_new`` per chain) with weight ``accept_p`` and keep the
+        rest pending on the current states."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            weight = np.where(f_new > 0, accept_p * self.scale / f_new, 0.0)
+        self._splat(image, proposal, weight)
+        self.pending += 1.0 - accept_p
+
+    def settle(self, image: np.ndarray, accept: np.ndarray, kind: np.ndarray, kinds: tuple[str, ...]) -> None:
+        """Flush the chains that ``accept`` and note the step's statistics; ``kind`` (chains,) indexes ``kinds``."""
+        self.flush(image, accept)
+        self.rejections = np.where(accept, 0, self.rejections + 1)
+        np.maximum(self.longest_rejections, self.rejections, out=self.longest_rejections)
+        for code, name in enumerate(kinds):
+            mask = kind == code
+            self.proposed[name] += int(mask.sum())
+            self.accepted[name] += int((mask & accept).sum())
+
+    def acceptance(self) -> dict:
+        """Accepted / proposed per kind of mutation (None: never proposed)."""
+        return {k: self.accepted[k] / self.proposed[k] if self.proposed[k] else None for k in self.proposed}
+
+    def flush(self, image: np.ndarray, chains: np.ndarray | None = None) -> None:
+        """Splat the pending weight of the current states of ``chains`` (bool per chain; None: all)."""
+        pending = self.pending if chains is None else np.where(chains, self.pending, 0.0)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            weight = np.where(self.f > 0, pending * self.scale / self.f, 0.0)
+        self._splat(image, self.current, weight)
+        if chains is None:
+            self.pending[:] = 0.0
+        else:
+            self.pending[chains] = 0.0
+
+    def _splat(self, image: np.ndarray, contributions: Proposal, weight: np.ndarray) -> None:
+        w = weight.take(contributions.lane)
+        live = np.flatnonzero(w)
+        if not live.size:
+            return
+        pixel = contributions.pixel.take(live)
+        for c in range(self.channels):
+            image[c] += np.bincount(pixel, weights=contributions.value[c].take(live) * w.take(live),
+                                    minlength=self.pixels)
+
+
+STEPS = ("small", "large")
+
+
+class Chains(Splatting):
+    """Metropolis chains over a target's streams, with their current contributions and statistics."""
+
+    def __init__(self, target: Target, contribution: Callable[[np.ndarray], np.ndarray], step: SmallStep,
+                 p_large: float, uniforms: Callable[[int], np.ndarray], label: np.ndarray, scale: np.ndarray,
+                 pixels: int, channels: int) -> None:
+        super().__init__(scale, pixels, channels, STEPS)
+        self.target, self.contribution, self.step, self.p_large = target, contribution, step, p_large
+        self.uniforms, self.label = uniforms, label
+        n = label.size
+        self.counters = new_counters(n)
+        self.states = {name: ChainStates(n, step, uniforms, self.counters) for name in target.streams}
 
     def start(self, numbers: dict[str, np.ndarray], counters: Counters) -> None:
         """Start every chain at the given numbers (per stream, (chains, dims), NaN: not drawn) and evaluate them."""
@@ -172,11 +222,9 @@ class Chains:
         proposal, f_new = self._evaluate(counters)
         with np.errstate(divide="ignore", invalid="ignore"):
             accept_p = np.where(self.f > 0, np.minimum(1.0, f_new / self.f), 1.0)
-            weight = np.where(f_new > 0, accept_p * self.scale / f_new, 0.0)
-        self._splat(image, proposal, weight)
-        self.pending += 1.0 - accept_p
+        self.propose(image, proposal, f_new, accept_p)
         accept = u[1] < accept_p
-        self.flush(image, accept)
+        self.settle(image, accept, large.astype(np.int64), STEPS)
         kept = ~accept.take(self.current.lane)
         taken = accept.take(proposal.lane)
         self.current = Proposal(*(np.concatenate([np.compress(kept, getattr(self.current, name), axis=-1),
@@ -186,32 +234,6 @@ class Chains:
         for states in self.states.values():
             states.settle(accept)
         advance(self.counters, accept)
-        self.rejections = np.where(accept, 0, self.rejections + 1)
-        np.maximum(self.longest_rejections, self.rejections, out=self.longest_rejections)
-        for kind, mask in (("large", large), ("small", ~large)):
-            self.proposed[kind] += int(mask.sum())
-            self.accepted[kind] += int((mask & accept).sum())
-
-    def flush(self, image: np.ndarray, chains: np.ndarray | None = None) -> None:
-        """Splat the pending weight of the current states of ``chains`` (bool per chain; None: all)."""
-        pending = self.pending if chains is None else np.where(chains, self.pending, 0.0)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            weight = np.where(self.f > 0, pending * self.scale / self.f, 0.0)
-        self._splat(image, self.current, weight)
-        if chains is None:
-            self.pending[:] = 0.0
-        else:
-            self.pending[chains] = 0.0
-
-    def _splat(self, image: np.ndarray, contributions: Proposal, weight: np.ndarray) -> None:
-        w = weight.take(contributions.lane)
-        live = np.flatnonzero(w)
-        if not live.size:
-            return
-        pixel = contributions.pixel.take(live)
-        for c in range(self.channels):
-            image[c] += np.bincount(pixel, weights=contributions.value[c].take(live) * w.take(live),
-                                    minlength=self.pixels)
 
 
 def _positive_integer(value, name):
@@ -257,8 +279,6 @@ class Metropolis(Estimator):
     def render(self, job: RenderJob, budget: Budget,
                on_checkpoint: Callable[[Checkpoint], None] | None = None) -> None:
         """Bootstrap, then passes of ceil(pixels / chains) steps of every chain until the budget is spent."""
-        from .passes import _Checkpoints
-
         film, control = job.film, job.control
         control.deadline = budget.seconds
         pixels = film.pixel_count
@@ -268,7 +288,7 @@ class Metropolis(Estimator):
         stats = job.stats.setdefault("metropolis", {})
         try:
             boot = bootstrap(target, self.bootstrap, self.chains, contribution, step,
-                             _uniforms(job, (_BOOTSTRAP, budget.first_pass)),
+                             uniform_stream(job, (_BOOTSTRAP, budget.first_pass)),
                              film.channels, job.counters, control.check)
         except Interrupted:
             return
@@ -281,36 +301,22 @@ class Metropolis(Estimator):
             return
         per_class = np.bincount(boot.label, minlength=target.classes)
         scale = pixels * boot.brightness.take(boot.label) / per_class.take(boot.label)
-        chains = Chains(target, contribution, step, self.p_large, _uniforms(job, (_CHAINS, budget.first_pass)),
+        chains = Chains(target, contribution, step, self.p_large, uniform_stream(job, (_CHAINS, budget.first_pass)),
                         boot.label, scale, pixels, film.channels)
         chains.start(boot.numbers, job.counters)
         steps = -(-pixels // boot.label.size)
-        checkpoints = _Checkpoints(budget, job, on_checkpoint)
+
+        def one_pass(_: int) -> np.ndarray:
+            image = np.zeros((film.channels, pixels))
+            for _ in range(steps):
+                control.check()
+                chains.step_all(image, job.counters)
+            chains.flush(image)
+            return image / steps
+
         started = control.elapsed()
-        passes = 0
-        try:
-            while budget.spp is None or passes < budget.spp:
-                image = np.zeros((film.channels, pixels))
-                for _ in range(steps):
-                    control.check()
-                    chains.step_all(image, job.counters)
-                chains.flush(image)
-                film.add_samples(budget.first_pass + passes, 0, image / steps)
-                passes += 1
-                if job.progress is not None:
-                    job.progress.update(1)
-                checkpoints.update()
-        except Interrupted:
-            pass
-        finally:
-            mutations = passes * steps * boot.label.size
-            seconds = control.elapsed() - started
-            stats.update(chains=int(boot.label.size), chains_per_class=per_class.tolist(), steps_per_pass=steps,
-                         mutations=mutations, mutations_per_second=mutations / seconds if seconds > 0 else 0.0,
-                         acceptance={k: chains.accepted[k] / chains.proposed[k] if chains.proposed[k] else None
-                                     for k in ("small", "large")},
-                         longest_rejection_run=int(chains.longest_rejections.max()),
-                         longest_rejection_run_median=float(np.median(chains.longest_rejections)))
+        passes = run_passes(job, budget, on_checkpoint, one_pass)
+        stats.update(chain_statistics(chains, per_class, passes, steps, control.elapsed() - started))
 
     def _black_passes(self, job: RenderJob, budget: Budget) -> None:
         """Nothing contributes (the bootstrap found no light): the budget's passes are black."""
@@ -319,7 +325,43 @@ class Metropolis(Estimator):
             job.film.add_samples(budget.first_pass + k, 0, np.zeros((job.film.channels, job.film.pixel_count)))
 
 
-def _uniforms(job: RenderJob, key: tuple[int, ...]) -> Callable[[int], np.ndarray]:
+def run_passes(job: RenderJob, budget: Budget, on_checkpoint: Callable[[Checkpoint], None] | None,
+               one_pass: Callable[[int], np.ndarray]) -> int:
+    """Put the images ``one_pass(pass index)`` (C, pixels) on the film as passes until the budget is spent or
+    the render is interrupted, firing checkpoints and progress; returns the passes made."""
+    from .passes import _Checkpoints
+
+    checkpoints = _Checkpoints(budget, job, on_checkpoint)
+    passes = 0
+    try:
+        while budget.spp is None or passes < budget.spp:
+            job.control.check()
+            index = budget.first_pass + passes
+            job.film.add_samples(index, 0, one_pass(index))
+            passes += 1
+            if job.progress is not None:
+                job.progress.update(1)
+            checkpoints.update()
+    except Interrupted:
+        pass
+    return passes
+
+
+def chain_statistics(chains: Splatting | None, per_class: np.ndarray, passes: int, steps: int,
+                     seconds: float) -> dict:
+    """What a Metropolis render reports of its chains after ``passes`` of ``steps`` steps in ``seconds`` (see
+    ``docs/metropolis.md``); ``per_class``: chains per class."""
+    count = int(per_class.sum())
+    mutations = passes * steps * count
+    found = dict(chains=count, chains_per_class=per_class.tolist(), steps_per_pass=steps, mutations=mutations,
+                 mutations_per_second=mutations / seconds if seconds > 0 else 0.0)
+    if chains is not None:
+        found.update(acceptance=chains.acceptance(), longest_rejection_run=int(chains.longest_rejections.max()),
+                     longest_rejection_run_median=float(np.median(chains.longest_rejections)))
+    return found
+
+
+def uniform_stream(job: RenderJob, key: tuple[int, ...]) -> Callable[[int], np.ndarray]:
     """k -> k uniform numbers from the render's sampler source, unit ``key`` (one lane drawing them all)."""
     sampler = job.samplers.open([key], [1])
     return lambda k: sampler.draw(k)[:, 0]

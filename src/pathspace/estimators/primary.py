@@ -16,7 +16,10 @@ anything (the number was not used), so bringing it up to date draws them now:
 the sum of n independent steps (exact for both kernels: a Gaussian of
 sigma sqrt(n), or n exponential steps summed), or a fresh uniform after a
 large step.  This is exactly the chain that mutates every number at every
-step, at the cost of the numbers used.
+step, at the cost of the numbers used -- except that n exponential steps
+cost 2n uniforms, so from :attr:`SmallStep.catch_up_limit` missed steps on
+(where their sum modulo 1 is within 1e-12 of uniform in total variation)
+the number is replaced by a fresh uniform instead.
 
 :class:`ChainStates` holds the chains' numbers of one stream; a
 :class:`PrimarySampler` serves a proposal's numbers to an estimator through
@@ -26,11 +29,13 @@ the :class:`~pathspace.sampler.Sampler` protocol, so any estimator with an
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 from typing import Callable
 
 import numpy as np
 
-__all__ = ["SmallStep", "ChainStates", "PrimarySampler", "KERNELS", "Uniforms", "new_counters", "advance", "film_position"]
+__all__ = ["SmallStep", "ChainStates", "PrimarySampler", "KERNELS", "Uniforms", "new_counters", "advance", "film_position",
+           "exponential_catch_up_limit"]
 
 KERNELS = ("exponential", "gaussian")
 Uniforms = Callable[[int], np.ndarray]  # k -> k uniform numbers in [0, 1) (float64)
@@ -66,6 +71,12 @@ class SmallStep:
         """s1 of the exponential kernel."""
         return self.size / 16.0
 
+    @property
+    def catch_up_limit(self) -> float:
+        """Missed exponential steps from which a number's catch-up draws one fresh uniform (see
+        :func:`exponential_catch_up_limit`); the Gaussian kernel's catch-up costs two uniforms at any count."""
+        return exponential_catch_up_limit(self.size) if self.kernel == "exponential" else np.inf
+
     def steps(self, count: np.ndarray, uniforms: Uniforms) -> np.ndarray:
         """The sum of ``count[i]`` independent steps for every i (0 for a count of 0), float64."""
         count = np.asarray(count, dtype=np.int64)
@@ -79,10 +90,28 @@ class SmallStep:
             normal = np.sqrt(-2.0 * np.log1p(-u[0])) * np.cos(2.0 * np.pi * u[1])  # Box-Muller
             out[moved] = self.size * np.sqrt(n) * normal
             return out
-        total = int(n.sum())
-        u = uniforms(2 * total).reshape(2, -1)
-        single = self.size * np.exp(-np.log(16.0) * u[0]) * np.where(u[1] < 0.5, -1.0, 1.0)
-        out[moved] = single if total == moved.size else np.add.reduceat(single, np.cumsum(n) - n)
+        # Past the limit the sum modulo 1 is uniform to within 1e-12: one uniform (a "step" in [0, 1)) stands
+        # for it, so a number's catch-up costs at most 2 * limit uniforms however long it was not used.
+        many = n >= self.catch_up_limit
+        if many.any():
+            out[moved[many]] = uniforms(int(np.count_nonzero(many)))
+            moved, n = moved[~many], n[~many]
+            if not moved.size:
+                return out
+        ends = np.cumsum(n)
+        total = int(ends[-1])
+        # The steps of consecutive numbers are summed in chunks of at most CATCH_UP_CHUNK (a bounded memory).
+        for first in range(0, total, CATCH_UP_CHUNK):
+            last = min(first + CATCH_UP_CHUNK, total)
+            u = uniforms(2 * (last - first)).reshape(2, -1)
+            single = self.size * np.exp(-np.log(16.0) * u[0]) * np.where(u[1] < 0.5, -1.0, 1.0)
+            if first == 0 and last == total:
+                out[moved] = single if total == moved.size else np.add.reduceat(single, ends - n)
+                break
+            owner = np.searchsorted(ends, np.arange(first, last), side="right")   # the number of each step
+            low = int(owner[0])
+            sums = np.bincount(owner - low, weights=single)
+            out[moved[low:low + sums.size]] += sums
         return out
 
     def pdf(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -95,6 +124,37 @@ class SmallStep:
         a = np.abs(d - np.round(d))              # distance on the circle (s2 <= 1/4: one image only)
         with np.errstate(divide="ignore"):
             return np.where((a >= self.smallest) & (a <= self.size), 0.5 / (a * np.log(16.0)), 0.0)
+
+
+CATCH_UP_CHUNK = 1 << 20   # exponential steps drawn at once by a catch-up (2 uniforms each)
+_TOTAL_VARIATION = 1e-12    # how far from uniform a caught-up number replaced by a fresh uniform may be
+
+
+@lru_cache(maxsize=None)
+def exponential_catch_up_limit(size: float) -> float:
+    """The number n of exponential small steps (s2 = ``size``, s1 = s2/16) from which their sum modulo 1 is
+    within total variation 1e-12 of the uniform distribution on [0, 1).
+
+    On the circle, the sum of n steps has Fourier coefficients phi(2 pi k)^n, with phi the step's
+    characteristic function, phi(2 pi k) = g(k s2), g(x) = int_0^1 cos(2 pi x 16^-v) dv (|step| = s2 16^-v,
+    v uniform).  By Cauchy-Schwarz and Parseval,
+        TV <= 1/2 ||density - 1||_2 = 1/2 (2 sum_{k>=1} phi(2 pi k)^(2n))^(1/2)
+           <= rho^(n-1) (A / 2)^(1/2),
+    with rho = max_{k>=1} |phi(2 pi k)| and A = sum_{k>=1} phi(2 pi k)^2 = (int p^2 - 1) / 2
+    = (15 / (2 s2 log(16)^2) - 1) / 2 (p: the step's density 1 / (2 |d| log 16), unwrapped since s2 <= 1/4).
+    rho = g(s2) for every s2 in (0, 1/4]: g decreases on [0, 1/2], and for x >= 1/4, |g(x)| <= g(1/4) = 0.80
+    (|Ci(y)| <= 2/y gives |g(x)| <= 17 / (pi x log 16) < 0.8 from x = 2.5; [1/4, 2.5] is checked on a grid
+    in the tests).  1 - rho = int_0^1 2 sin^2(pi s2 16^-v) dv ~ 3.55 s2^2 for small s2, so the limit grows as
+    1 / s2^2: 125 steps at s2 = 1/4, 2042 at 1/16, 33497 at 1/64 (the default), 8.2e4 at 1/100, 8.6e6 at
+    1/1000 (below s2 = 1.1e-9 no int64 count reaches it).
+    """
+    nodes, weights = np.polynomial.legendre.leggauss(64)
+    v = 0.5 * (nodes + 1.0)
+    gap = float(np.dot(0.5 * weights, 2.0 * np.sin(np.pi * size * 16.0 ** -v) ** 2))   # 1 - rho
+    if gap <= 0.0:
+        return np.inf
+    a = (15.0 / (2.0 * size * np.log(16.0) ** 2) - 1.0) / 2.0
+    return float(1.0 + np.ceil((0.5 * np.log(a / 2.0) - np.log(_TOTAL_VARIATION)) / -np.log1p(-gap)))
 
 
 class ChainStates:

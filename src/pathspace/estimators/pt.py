@@ -60,7 +60,7 @@ from ..mis import TWO_STRATEGY, mis_weight
 from ..roulette import RussianRoulette, roulette_warnings
 from ..sampler import Sampler
 from ..spectra import RGBMode
-from ..vecmath import RAY_TMIN, dot, offset_origin
+from ..vecmath import RAY_TMIN, offset_origin
 from . import parameters as p
 from .base import TILE_PIXELS, Counters, Estimator, ItemResult, RenderJob, WorkItem, parameter
 from .visibility import light_sample_blocked

@@ -1,0 +1,323 @@
+"""Veach's path-space Metropolis light transport (Veach & Guibas 1997; Veach 1997, ch. 11).
+
+A chain's state is a path x_0 .. x_k itself (:mod:`pathspace.estimators.paths`),
+and the chains sample paths in proportion to c(f(x)) (c: luminance Y by
+default) by a mixture of Veach's mutations
+(:mod:`pathspace.estimators.path_mutations`), chosen per step with
+probabilities ``bidirectional`` : ``lens`` : ``caustic`` : ``multichain``; each accepts with
+a = min(1, c(f(y)) T(y -> x) / (c(f(x)) T(x -> y))), the transition
+densities computed exactly.  Bidirectional mutations make the chains
+ergodic; the perturbations explore near a path (the lens perturbation
+moves what the camera sees, the caustic perturbation moves where light
+through specular chains lands, the multi-chain perturbation moves caustics
+seen through specular chains).
+
+As Veach recommends (sec. 11.5), paths of at most ``direct`` segments --
+emitters seen directly and direct lighting -- are not left to the chains:
+each pass renders them with BDPT (``max_depth = direct``, one sample per
+pixel), and the chains sample only longer paths.
+
+Normalisation and start (sec. 11.3.1).  Each path length L (``direct`` + 1
+.. ``max_depth``) is a class with ``bootstrap`` independent samples: paths
+made by a light walk of j vertices and a camera walk of L - j, j uniform,
+weighted by f / ((1 / (L + 1)) sum_j p_j) -- a one-sample MIS (balance)
+estimate of the energy b_L of paths of length L.  Chains are shared out in
+proportion to b_L and start at samples drawn in proportion to c(f) / p;
+each chain's splats are scaled by P b_L / (chains of its length), as in
+:mod:`pathspace.estimators.metropolis`, whose expected-value splatting and
+statistics it shares.  Chains change length freely.
+
+Scope: RGB renders of scenes lit by area lights and seen by a pinhole
+camera (the camera vertex is never mutated); for point, spot, directional or
+environment lights, a thin lens or spectral renders use ``mmlt`` or
+``pssmlt``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import partial
+
+import numpy as np
+
+from ..checks import choice, integer, number
+from ..lights.area import AreaLight
+from .base import Budget, Counters, Estimator, RenderJob, parameter
+from .bdpt import BDPT
+from .bidirectional import STREAMS
+from .bootstrap import BATCH, GROUPS, allocate, reservoir_draw
+from .control import Interrupted
+from .metropolis import (CONTRIBUTIONS, Proposal, Splatting, chain_statistics, contribution_function, run_passes,
+                         uniform_stream)
+from . import path_mutations as mutations
+from .path_mutations import ADD_SPREAD, Lengths, Proposed, fresh_paths
+from .paths import Paths, PathValues
+
+__all__ = ["MLT", "PathChains"]
+
+MUTATIONS = ("bidirectional", "lens", "caustic", "multichain")
+LENS_RADIUS = 0.1        # r1 of the lens perturbation, pixels; r2 is LENS_FRACTION of the larger film side
+LENS_FRACTION = 0.1
+CAUSTIC_ANGLE = (1e-4, 0.1)   # theta1, theta2 of the caustic perturbation, radians (Veach 1997, sec. 11.4.4)
+# Random streams of a render (the first number of each unit key).
+_BOOTSTRAP, _CHAINS, _DIRECT = 0, 1, 2
+
+
+@dataclass
+class Bootstrap:
+    """Per path length (class): ``brightness`` b_L, its ``standard_error``; the chains' starting paths, their
+    values and ``label`` (class)."""
+
+    brightness: np.ndarray
+    standard_error: np.ndarray
+    paths: Paths
+    values: PathValues | None      # None without chains
+    label: np.ndarray
+
+
+class PathChains(Splatting):
+    """Path-space chains: their paths, values, and one mutation of every chain per :meth:`step_all`."""
+
+    def __init__(self, scene, estimator: "MLT", contribution, start: Bootstrap, scale: np.ndarray, pixels: int,
+                 uniforms) -> None:
+        super().__init__(scale, pixels, 3, MUTATIONS)
+        self.scene, self.lengths, self.contribution, self.uniforms = scene, estimator.lengths, contribution, uniforms
+        self.cdf = np.cumsum(estimator.weights)
+        self.paths, self.values = start.paths, start.values
+        self.f = contribution(self.values.f)
+        self.current = Proposal(np.arange(self.paths.count), self.values.pixel, self.values.f)
+        camera = scene.camera
+        self.lens_radius = (LENS_RADIUS, max(LENS_RADIUS, LENS_FRACTION * max(camera.width, camera.height)))
+
+    def _mutate(self, kind: int, x: Paths, xv: PathValues) -> Proposed:
+        if kind == 0:
+            return mutations.bidirectional(self.scene, self.lengths, x, xv, self.uniforms)
+        if kind == 1:
+            return mutations.lens(self.scene, x, xv, self.uniforms, self.lens_radius)
+        if kind == 2:
+            return mutations.caustic(self.scene, x, xv, self.uniforms, CAUSTIC_ANGLE)
+        return mutations.multichain(self.scene, x, xv, self.uniforms, self.lens_radius, CAUSTIC_ANGLE)
+
+    def step_all(self, image: np.ndarray, counters: Counters) -> None:
+        """One mutation of every chain, splatting into ``image`` (3, pixels)."""
+        n = self.paths.count
+        u = self.uniforms(2 * n).reshape(2, n)
+        kind = np.minimum(np.searchsorted(self.cdf, u[0], side="right"), len(MUTATIONS) - 1)
+        f_new, accept_p = np.zeros(n), np.zeros(n)
+        value, pixel = np.zeros((3, n)), np.zeros(n, np.int64)
+        proposals = {}
+        for code in np.unique(kind):
+            lanes = np.flatnonzero(kind == code)
+            # Slots the paths and their proposals can use (a bidirectional mutation adds at most ADD_SPREAD).
+            slots = min(self.paths.slots, int(self.paths.k[lanes].max()) + 1 + ADD_SPREAD)
+            proposed = self._mutate(int(code), self.paths.take(lanes, slots), self.values.take(lanes, slots))
+            c = self.contribution(proposed.values.f)
+            finite = np.isfinite(proposed.values.f).all(axis=0) & np.isfinite(c)
+            counters.nonfinite_contributions += int(finite.size - np.count_nonzero(finite))
+            c = np.where(finite & (proposed.ratio > 0), c, 0.0)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                a = np.where(self.f[lanes] > 0, np.minimum(1.0, c * proposed.ratio / self.f[lanes]), 1.0)
+            f_new[lanes], accept_p[lanes] = c, np.where(c > 0, a, 0.0)
+            value[:, lanes] = np.where(finite, proposed.values.f, 0.0)
+            pixel[lanes] = proposed.values.pixel
+            proposals[int(code)] = (lanes, proposed)
+        self.propose(image, Proposal(np.arange(n), pixel, value), f_new, accept_p)
+        accept = u[1] < accept_p
+        self.settle(image, accept, kind, MUTATIONS)
+        for lanes, proposed in proposals.values():
+            taken = np.flatnonzero(accept.take(lanes))
+            if taken.size:
+                self.paths.assign(lanes.take(taken), proposed.paths.take(taken))
+                self.values.assign(lanes.take(taken), proposed.values.take(taken))
+        self.f = np.where(accept, f_new, self.f)
+        self.current = Proposal(np.arange(n), self.values.pixel, self.values.f)
+
+
+def _mutation_weight(value, name):
+    return number(value, name, low=0.0, what="a weight >= 0")
+
+
+@dataclass
+class MLT(Estimator):
+    """Veach's path-space MLT; see the module docstring for the method."""
+
+    name = "mlt"
+    independent_passes = False
+
+    max_depth: int = parameter(16, "longest path in segments (each length has its own chains)",
+                               partial(integer, low=1))
+    direct: int = parameter(2, "paths of at most this many segments are rendered by BDPT each pass, not by the "
+                               "chains (Veach's direct lighting); 0: the chains render every length",
+                            partial(integer, low=0))
+    chains: int = parameter(16384, "Markov chains advanced together (one wavefront)", partial(integer, low=1))
+    bootstrap: int = parameter(1 << 14, "independent paths per path length that estimate its brightness and the "
+                                        "chains' starting paths", partial(integer, low=1))
+    bidirectional: float = parameter(0.4, "weight of the bidirectional mutation (must be > 0: it alone reaches "
+                                           "every path)", _mutation_weight)
+    lens: float = parameter(0.25, "weight of the lens perturbation", _mutation_weight)
+    caustic: float = parameter(0.25, "weight of the caustic perturbation", _mutation_weight)
+    multichain: float = parameter(0.1, "weight of the multi-chain perturbation", _mutation_weight)
+    contribution: str = parameter("luminance", "the scalar the chains sample: 'luminance' (Y), 'xyz' (X + Y + Z) "
+                                               "or 'max' (largest channel)", partial(choice, options=CONTRIBUTIONS))
+    lengths: Lengths = field(init=False, repr=False)
+    direct_estimator: BDPT | None = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.bidirectional <= 0:
+            raise ValueError("bidirectional: expected a weight > 0 (without bidirectional mutations the chains "
+                             f"cannot change a path's length or specular structure), got {self.bidirectional!r}")
+        if self.direct >= self.max_depth:
+            raise ValueError(f"direct: expected fewer segments than max_depth = {self.max_depth} (the chains render "
+                             f"lengths direct + 1 .. max_depth), got {self.direct!r}")
+        self.lengths = Lengths(self.max_depth, self.direct + 1)
+        self.direct_estimator = BDPT(max_depth=self.direct) if self.direct else None
+
+    @property
+    def weights(self) -> np.ndarray:
+        """The mutations' probabilities, in :data:`MUTATIONS` order."""
+        weights = np.array([self.bidirectional, self.lens, self.caustic, self.multichain])
+        return weights / weights.sum()
+
+    def plan(self, scene) -> list[str]:
+        """What the chains explore and what BDPT renders."""
+        w = self.weights
+        lines = [f"path-space MLT (Veach & Guibas 1997): {self.chains} chains over paths of {self.direct + 1} .. "
+                 f"{self.max_depth} segments, started from {self.bootstrap} bootstrap paths per length in "
+                 f"proportion to the {self.contribution}; mutations: bidirectional {w[0]:.2f}, lens perturbation "
+                 f"{w[1]:.2f}, caustic perturbation {w[2]:.2f}, multi-chain perturbation {w[3]:.2f}; expected-value "
+                 "splatting"]
+        if self.direct:
+            lines.append(f"paths of at most {self.direct} segments by BDPT, one sample per pixel per pass")
+        return lines
+
+    def check(self, scene) -> None:
+        """Path-space MLT needs area lights and a pinhole camera."""
+        others = sorted({type(light).__name__ for light in scene.lights.lights if not isinstance(light, AreaLight)})
+        if others:
+            raise ValueError(f"estimator 'mlt': path-space MLT supports area lights only, the scene has "
+                             f"{', '.join(others)}; use 'mmlt' or 'pssmlt'")
+        if not scene.camera.delta_position:
+            raise ValueError("estimator 'mlt': path-space MLT supports a pinhole camera only, the scene has a thin "
+                             "lens; use 'mmlt' or 'pssmlt'")
+
+    def prepare(self, scene) -> None:
+        """Build the BVH and load colour-science's matrices before the clock starts."""
+        from ..spectra import xyz_to_srgb_matrix
+
+        xyz_to_srgb_matrix()
+        scene.accel
+
+    def render(self, job: RenderJob, budget: Budget, on_checkpoint=None) -> None:
+        """Bootstrap, then passes of ceil(pixels / chains) steps of every chain plus one BDPT pass of the direct
+        paths, until the budget is spent."""
+        if job.mode.name != "rgb":
+            raise ValueError("estimator 'mlt': path-space MLT renders in RGB only; use 'mmlt' or 'pssmlt' for "
+                             "spectral renders")
+        film, control = job.film, job.control
+        control.deadline = budget.seconds
+        pixels = film.pixel_count
+        contribution = contribution_function(self.contribution, job.mode)
+        stats = job.stats.setdefault("metropolis", {})
+        try:
+            boot = self._bootstrap(job.scene, contribution, uniform_stream(job, (_BOOTSTRAP, budget.first_pass)),
+                                   job.counters, control.check)
+        except Interrupted:
+            return
+        direct = self.direct_estimator if job.scene.lights.count else None
+        stats.update(bootstrap=self.bootstrap, brightness=float(boot.brightness.sum()),
+                     brightness_standard_error=float(np.sqrt((boot.standard_error ** 2).sum())),
+                     class_brightness=boot.brightness.tolist(),
+                     class_brightness_standard_error=boot.standard_error.tolist(), direct=self.direct)
+        chains = None
+        per_class = np.bincount(boot.label, minlength=boot.brightness.size)
+        if boot.label.size:
+            scale = pixels * boot.brightness.take(boot.label) / per_class.take(boot.label)
+            chains = PathChains(job.scene, self, contribution, boot, scale, pixels,
+                                uniform_stream(job, (_CHAINS, budget.first_pass)))
+        steps = -(-pixels // max(boot.label.size, 1)) if chains is not None else 0
+
+        def one_pass(index: int) -> np.ndarray:
+            image = np.zeros((film.channels, pixels))
+            if chains is not None:
+                for _ in range(steps):
+                    control.check()
+                    chains.step_all(image, job.counters)
+                chains.flush(image)
+                image /= steps
+            if direct is not None:
+                image += self._direct(job, index)
+            return image
+
+        started = control.elapsed()
+        passes = run_passes(job, budget, on_checkpoint, one_pass)
+        stats.update(chain_statistics(chains, per_class, passes, steps, control.elapsed() - started))
+
+    def _direct(self, job: RenderJob, pass_index: int) -> np.ndarray:
+        """One BDPT sample per pixel of the paths of at most ``direct`` segments (3, pixels)."""
+        pixels = job.film.pixel_count
+        samplers = {name: job.samplers.open([(_DIRECT, pass_index, code)], [pixels]) for name, code in STREAMS.items()}
+        found = self.direct_estimator.evaluate(job.scene, np.arange(pixels), samplers, job.mode, job.counters)
+        return np.stack([np.bincount(found.pixel, weights=found.weighted[c], minlength=pixels)
+                         for c in range(job.film.channels)])
+
+    def _bootstrap(self, scene, contribution, uniforms, counters: Counters, check) -> Bootstrap:
+        """b_L with its standard error per path length, and the chains' starts (see the module docstring)."""
+        first = self.direct + 1
+        classes = self.max_depth - first + 1
+        sums = np.zeros((classes, GROUPS))
+        picks = []
+        for label in range(classes if scene.lights.count else 0):
+            length = first + label
+            reservoir: dict = {"total": 0.0, "paths": None}
+            for start in range(0, self.bootstrap, BATCH):
+                check()
+                count = min(BATCH, self.bootstrap - start)
+                paths, values, density = fresh_paths(scene, np.full(count, length), length + 1, uniforms)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    weighted = np.where(density > 0, values.f / density, 0.0)
+                c = contribution(weighted)
+                finite = np.isfinite(weighted).all(axis=0) & np.isfinite(c)
+                counters.nonfinite_contributions += int(finite.size - np.count_nonzero(finite))
+                c = np.where(finite, c, 0.0)
+                sums[label] += np.bincount((start + np.arange(count)) % GROUPS, weights=c, minlength=GROUPS)
+                _keep(reservoir, c, paths, self.chains, uniforms)
+            picks.append(reservoir["paths"])
+        per_group = self.bootstrap / GROUPS
+        brightness = sums.sum(axis=1) / self.bootstrap
+        standard_error = (sums / per_group).std(axis=1, ddof=1) / np.sqrt(GROUPS)
+        return self._starts(scene, brightness, standard_error, picks)
+
+    def _starts(self, scene, brightness, standard_error, picks: list) -> Bootstrap:
+        """Share the chains out among the lengths and gather their starting paths."""
+        from .paths import evaluate
+
+        per_class = allocate(brightness, self.chains)
+        slots = self.max_depth + 1
+        paths = Paths.empty(int(per_class.sum()), slots)
+        labels, row = [], 0
+        for label, count in enumerate(per_class):
+            if count:
+                chosen = picks[label].take(np.arange(count))
+                width = chosen.slots
+                paths.k[row:row + count] = chosen.k
+                for name in Paths.FIELDS:
+                    getattr(paths, name)[..., row:row + count, :width] = getattr(chosen, name)
+                labels.append(np.full(count, label))
+                row += count
+        return Bootstrap(brightness, standard_error, paths, evaluate(scene, paths) if row else None,
+                         np.concatenate(labels) if labels else np.zeros(0, np.int64))
+
+
+def _keep(reservoir: dict, c: np.ndarray, paths: Paths, slots: int, uniforms) -> None:
+    """Weighted reservoir sampling (with replacement) of ``slots`` starting paths in proportion to ``c``."""
+    drawn = reservoir_draw(reservoir, c, slots, uniforms)
+    if drawn is None:
+        return
+    candidate, replace = drawn
+    chosen = paths.take(candidate)
+    held = reservoir["paths"]
+    if held is None:
+        reservoir["paths"] = chosen
+        return
+    take = np.flatnonzero(replace)
+    held.assign(take, chosen.take(take))

@@ -1,0 +1,229 @@
+"""Explicit light paths x_0 .. x_k, their contribution f(x) and the densities of generating each vertex.
+
+Path-space Metropolis light transport (Veach & Guibas 1997; Veach 1997,
+ch. 11) keeps a chain's state as the path itself.  A :class:`Paths` holds
+one path per lane, vertex 0 on a light (an area emitter) and vertex k at the
+camera (a pinhole), padded to a common number of vertex slots.
+
+:func:`evaluate` computes, per path, the measurement contribution in the
+film's units (Veach 1997, eq. 8.7, with the camera's importance written so
+that f / p is a path-tracing sample of a uniform film position)
+
+    f(x) = Le(x_0 -> x_1) prod_{i=1}^{k-1} f_s(x_i) |cos_i| prod_{e=0}^{k-1} |cos_e| / d_e^2 p_cam(x_k -> x_{k-1}),
+
+where f_s(x_i) |cos_i| is the BSDF at x_i times the cosine toward x_{i-1},
+|cos_e| / d_e^2 the cosine at x_e toward x_{e+1} over the squared length of
+segment e, and p_cam the camera's solid-angle density of directions for a
+uniform film position; and the area densities with which each vertex is
+generated from its neighbours (Veach 1997, sec. 10.2):
+
+``fwd[i]``  from x_{i-1} (a walk from the light): fwd[0] the light's point density (with the
+            light-choice pmf), fwd[1] the emission's direction density, then BSDF sampling;
+``rev[i]``  from x_{i+1} (a walk from the camera): rev[k-1] the camera's, then BSDF sampling.
+
+Specular (delta) vertices use the convention of Veach (1997, sec. 11.5): the
+Dirac deltas of f and of the densities cancel, so a specular vertex's
+"BSDF" is its lobe's weight times the lobe's probability and its "density"
+is the lobe's probability (as :meth:`pathspace.bsdfs.MaterialLanes.sample`
+reports them); ratios of f and of densities of paths with the same specular
+vertices are then exact.  Edges are assumed unoccluded: whoever builds a
+path traces or tests every segment it makes.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..bsdfs import MaterialLanes, Surface
+from ..spectra import RGBColours
+from ..vecmath import dot
+
+__all__ = ["Paths", "PathValues", "evaluate", "delta_lobe", "OPTIONS"]
+
+# BSDF options of the paths' materials (cosine-weighted diffuse sampling).
+OPTIONS = {"diffuse_sampling": "cosine"}
+# Two directions are the same lobe's when their cosine exceeds this (positions are float32).
+SAME_DIRECTION = 1.0 - 1e-5
+_LOBE_NUMBERS = (0.0, 1.0 - 2.0 ** -20)   # the first BSDF number picking the first or the last lobe
+
+
+@dataclass
+class Paths:
+    """One path per lane: ``k`` (N,) segments; per vertex slot (N, K): ``p`` and ``n`` (3, N, K) float32 position
+    and geometric normal (the light's normal at vertex 0, the camera axis at vertex k), ``eps`` ray-offset
+    bound, ``material`` (-1 at the light and camera vertices) and ``entity`` (the light entity of vertex 0 and
+    of surface vertices on emitters, else -1)."""
+
+    k: np.ndarray
+    p: np.ndarray
+    n: np.ndarray
+    eps: np.ndarray
+    material: np.ndarray
+    entity: np.ndarray
+
+    FIELDS = ("p", "n", "eps", "material", "entity")
+
+    @classmethod
+    def empty(cls, count: int, slots: int) -> "Paths":
+        """``count`` paths of no segments with ``slots`` vertex slots each."""
+        return cls(np.zeros(count, np.int64), np.zeros((3, count, slots), np.float32),
+                   np.zeros((3, count, slots), np.float32), np.zeros((count, slots), np.float32),
+                   np.full((count, slots), -1, np.int64), np.full((count, slots), -1, np.int64))
+
+    @property
+    def count(self) -> int:
+        """Number of paths."""
+        return int(self.k.size)
+
+    @property
+    def slots(self) -> int:
+        """Vertex slots per path."""
+        return int(self.material.shape[1])
+
+    def vertex(self, lanes: np.ndarray, index: np.ndarray) -> dict[str, np.ndarray]:
+        """Fields of vertex ``index`` of paths ``lanes`` (both (n,)): ``p``, ``n`` (3, n), ``eps``, ``material``,
+        ``entity`` (n,)."""
+        return {name: getattr(self, name)[..., lanes, index] for name in self.FIELDS}
+
+    def put(self, lanes: np.ndarray, index: np.ndarray, vertex: dict[str, np.ndarray]) -> None:
+        """Write ``vertex`` (fields as :meth:`vertex` returns them) into slot ``index`` of paths ``lanes``."""
+        for name in self.FIELDS:
+            getattr(self, name)[..., lanes, index] = vertex[name]
+
+    def take(self, lanes: np.ndarray, slots: int | None = None) -> "Paths":
+        """The paths ``lanes``, with their first ``slots`` vertex slots (default: all)."""
+        return Paths(self.k.take(lanes), *(np.take(getattr(self, name)[..., :slots], lanes, axis=-2)
+                                           for name in self.FIELDS))
+
+    def assign(self, lanes: np.ndarray, other: "Paths") -> None:
+        """Paths ``lanes`` become ``other``'s (one each; ``other`` may have fewer vertex slots)."""
+        self.k[lanes] = other.k
+        for name in self.FIELDS:
+            getattr(self, name)[..., lanes, :other.slots] = getattr(other, name)
+
+
+@dataclass
+class PathValues:
+    """What :func:`evaluate` finds: ``f`` (C, N) film contribution (0 for impossible paths), ``raster`` (2, N)
+    film position, ``pixel`` (N,), per vertex slot (N, K) ``fwd`` and ``rev`` area densities (see the module
+    docstring), ``delta`` (specular vertices), ``g_fwd`` |cos_i| / d^2 of segment i-1 and ``g_rev`` |cos_i| / d^2
+    of segment i (what turns a solid-angle density at the neighbour into an area density at x_i)."""
+
+    f: np.ndarray
+    raster: np.ndarray
+    pixel: np.ndarray
+    fwd: np.ndarray
+    rev: np.ndarray
+    delta: np.ndarray
+    g_fwd: np.ndarray
+    g_rev: np.ndarray
+
+    PER_LANE = ("f", "raster", "pixel")                         # lanes on the last axis
+    PER_VERTEX = ("fwd", "rev", "delta", "g_fwd", "g_rev")      # (N, K)
+
+    def take(self, lanes: np.ndarray, slots: int | None = None) -> "PathValues":
+        """The values of paths ``lanes``, with their first ``slots`` vertex slots (default: all)."""
+        return PathValues(**{name: np.take(getattr(self, name), lanes, axis=-1) for name in self.PER_LANE},
+                          **{name: getattr(self, name)[lanes, :slots] for name in self.PER_VERTEX})
+
+    def assign(self, lanes: np.ndarray, other: "PathValues") -> None:
+        """Paths ``lanes`` take ``other``'s values (one each; ``other`` may have fewer vertex slots)."""
+        for name in self.PER_LANE:
+            getattr(self, name)[..., lanes] = getattr(other, name)
+        width = other.fwd.shape[1]
+        for name in self.PER_VERTEX:
+            getattr(self, name)[lanes, :width] = getattr(other, name)
+
+
+def delta_lobe(materials: MaterialLanes, surface: Surface, toward: np.ndarray, mode: str):
+    """(f |cos| (C, n), probability (n,)) of the delta lobe of each lane's specular material that scatters light
+    seen as ``surface`` toward unit ``toward`` (3, n): the lobe's weight times its probability, and its
+    probability; zero where no lobe goes there."""
+    count = toward.shape[1]
+    f_cos, probability = np.zeros((materials.channels, count)), np.zeros(count)
+    for first in _LOBE_NUMBERS:
+        u = np.vstack((np.full(count, first), np.full((2, count), 0.5)))
+        sample = materials.sample(surface, u, mode)
+        match = (dot(sample.wi.astype(np.float64), toward) > SAME_DIRECTION) & (sample.pdf > 0)
+        f_cos = np.where(match, sample.weight * sample.pdf, f_cos)
+        probability = np.where(match, sample.pdf, probability)
+    return f_cos, probability
+
+
+def _scattering(scene, material: np.ndarray, n: np.ndarray, to_prev: np.ndarray, to_next: np.ndarray):
+    """At surface vertices with ``material`` and normals ``n`` (3, n), neighbours along unit ``to_prev``
+    (toward the light end) and ``to_next`` (toward the camera): (f_s |cos toward prev| (C, n) for light
+    arriving from prev, density of sampling ``to_prev`` from the camera side, density of sampling ``to_next``
+    from the light side, specular)."""
+    table = scene.materials
+    materials = MaterialLanes(table, material, RGBColours, OPTIONS)
+    delta = table.delta.take(material)
+    from_camera = Surface.facing(n, -to_next)   # a walk from the camera arrives from the next vertex
+    from_light = Surface.facing(n, -to_prev)    # a walk from the light arrives from the previous one
+    f_cos, pdf_prev = materials.eval(from_camera, to_prev.astype(np.float32))
+    _, pdf_next = materials.eval(from_light, to_next.astype(np.float32))
+    if delta.any():
+        d = np.flatnonzero(delta)
+        specular = MaterialLanes(table, material.take(d), RGBColours, OPTIONS)
+        lobe_f, lobe_prev = delta_lobe(specular, from_camera.take(d), np.take(to_prev, d, axis=1), "radiance")
+        _, lobe_next = delta_lobe(specular, from_light.take(d), np.take(to_next, d, axis=1), "importance")
+        f_cos[:, d], pdf_prev[d], pdf_next[d] = lobe_f, lobe_prev, lobe_next
+    return f_cos, pdf_prev, pdf_next, delta
+
+
+def evaluate(scene, paths: Paths) -> PathValues:
+    """f(x), the film position and the vertex densities of every path (see the module docstring)."""
+    count, slots = paths.material.shape
+    lanes = np.arange(count)
+    k = paths.k
+    p = paths.p.astype(np.float64)
+    n = paths.n.astype(np.float64)
+    edge = p[:, :, 1:] - p[:, :, :-1]                       # segment i: from x_i to x_{i+1}
+    dist2 = (edge * edge).sum(axis=0)
+    on_path = np.arange(slots - 1)[None, :] < k[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        w = np.where(on_path, edge / np.sqrt(np.where(on_path, dist2, 1.0)), 0.0)
+        cos_start = np.abs((n[:, :, :-1] * w).sum(axis=0))   # at x_i toward x_{i+1}
+        cos_end = np.abs((n[:, :, 1:] * w).sum(axis=0))      # at x_{i+1} toward x_i
+        g_fwd = np.zeros((count, slots))
+        g_rev = np.zeros((count, slots))
+        g_fwd[:, 1:] = np.where(on_path & (dist2 > 0), cos_end / dist2, 0.0)
+        g_rev[:, :-1] = np.where(on_path & (dist2 > 0), cos_start / dist2, 0.0)
+    fwd, rev = np.zeros((count, slots)), np.zeros((count, slots))
+    delta = np.zeros((count, slots), bool)
+    f = np.ones((3, count))
+    # The light: x_0's emission toward x_1, its point density and the direction's.
+    entity = paths.entity[:, 0]
+    w0 = np.ascontiguousarray(w[:, :, 0])
+    lit = (entity >= 0) & (k >= 1)
+    safe_entity = np.where(lit, entity, 0)
+    f *= np.where(lit, scene.lights.le(safe_entity, paths.n[:, :, 0], w0.astype(np.float32), RGBColours), 0.0)
+    origin, pdf_dir = scene.lights.pdf_le(safe_entity, paths.n[:, :, 0], w0.astype(np.float32))
+    fwd[:, 0] = np.where(lit, origin, 0.0)
+    fwd[:, 1] = np.where(lit, pdf_dir * g_fwd[:, 1], 0.0)
+    # Surface vertices x_1 .. x_{k-1}.
+    row, col = np.nonzero((np.arange(slots)[None, :] >= 1) & (np.arange(slots)[None, :] < k[:, None]))
+    if row.size:
+        f_cos, pdf_prev, pdf_next, specular = _scattering(scene, paths.material[row, col], paths.n[:, row, col],
+                                                          -w[:, row, col - 1], w[:, row, col])
+        factor = np.ones((3, count, slots))
+        factor[:, row, col] = f_cos
+        f *= factor.prod(axis=2)
+        rev[row, col - 1] = pdf_prev * g_rev[row, col - 1]
+        nxt = col + 1 < k[row]
+        fwd[row[nxt], col[nxt] + 1] = pdf_next[nxt] * g_fwd[row[nxt], col[nxt] + 1]
+        delta[row, col] = specular
+    # Segments and the camera.
+    camera = scene.camera
+    last = np.maximum(k - 1, 0)
+    toward_path = -w[:, lanes, last]                         # from the camera to x_{k-1}
+    pdf_camera = camera.pdf_direction(toward_path.astype(np.float32))
+    rev[lanes, last] = pdf_camera * g_rev[lanes, last]
+    segments = np.where(on_path, np.divide(cos_start, dist2, out=np.zeros_like(dist2), where=dist2 > 0), 1.0)
+    f *= segments.prod(axis=1) * pdf_camera
+    raster, inside = camera.raster(paths.p[:, lanes, last])
+    f = np.where(inside & (k >= 1) & np.isfinite(f).all(axis=0), f, 0.0)
+    x = np.clip(np.nan_to_num(raster[0]), 0, camera.width - 1).astype(np.int64)
+    y = np.clip(np.nan_to_num(raster[1]), 0, camera.height - 1).astype(np.int64)
+    return PathValues(f, raster, y * camera.width + x, fwd, rev, delta, g_fwd, g_rev)
