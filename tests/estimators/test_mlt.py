@@ -19,7 +19,7 @@ from pathspace.estimators.path_mutations import (Lengths, caustic, caustic_towar
                                                  multichain, multichain_to)
 from pathspace.estimators.path_walks import unit
 from pathspace.vecmath import orthonormal_basis
-from pathspace.estimators.paths import evaluate
+from pathspace.estimators.paths import Space, evaluate
 
 from .test_metropolis import (ALPHA, MAX_DEPTH, check_blocks, check_brightness, luminance, luminance_and_error,
                               reference, scene)
@@ -54,7 +54,7 @@ def test_independent_paths_give_each_length_bdpt_energy(name):
     for length in range(1, 5):
         groups = []
         for _ in range(8):
-            _, values, density = fresh_paths(s, np.full(20000, length), length + 1, rng.random)
+            _, values, density = fresh_paths(Space(s), np.full(20000, length), length + 1, rng.random)
             with np.errstate(divide="ignore", invalid="ignore"):
                 groups.append(Y @ np.where(density > 0, values.f / density, 0.0).mean(axis=1))
         energy, error = np.mean(groups), np.std(groups, ddof=1) / np.sqrt(len(groups))
@@ -77,7 +77,7 @@ def test_paths_know_their_densities():
         assert (lengths.p_deletion(np.full(kd.size, k), kd) * (k - kd + 2)).sum() == pytest.approx(1.0)
     for kd in range(1, 10):
         assert lengths.add[kd].sum() == pytest.approx(1.0)
-    s = scene("cornell-box")
+    s = Space(scene("cornell-box"))
     paths, values, _ = fresh_paths(s, np.full(4000, 2), 3, np.random.default_rng(1).random)
     again = evaluate(s, paths)
     np.testing.assert_array_equal(again.f, values.f)
@@ -208,7 +208,7 @@ def test_perturbations_are_reversible_with_exact_density_ratios(name, mutation):
     offset from y finds x again, and the ratio T(y -> x) / T(x -> y) the move reports equals the ratio of
     the areas its regenerated vertex sweeps per unit offset at y and at x, measured by central differences
     (the offsets' own density is symmetric)."""
-    s = scene(name, (64, 64))
+    s = Space(scene(name, (64, 64)))
     rng = np.random.default_rng(7)
     length = rng.integers(2, 6, 6000)
     paths, values, density = fresh_paths(s, length, 6, rng.random)
@@ -240,7 +240,7 @@ def test_perturbations_are_reversible_with_exact_density_ratios(name, mutation):
 def test_multichain_perturbation_is_reversible():
     """The multi-chain perturbation's inverse (back to x's film position, and x's direction out of x_j) finds x
     again, on the specular box's caustics seen through the glass sphere."""
-    s = scene("cornell-box-specular", (64, 64))
+    s = Space(scene("cornell-box-specular", (64, 64)))
     rng = np.random.default_rng(3)
     paths, values, density = fresh_paths(s, rng.integers(4, 8, 40000), 8, rng.random)
     keep = np.flatnonzero((density > 0) & values.f.any(axis=0))
@@ -257,3 +257,19 @@ def test_multichain_perturbation_is_reversible():
     assert (forward.ratio > 0).sum() < 1.1 * made.sum()
     np.testing.assert_allclose(back.paths.p[:, made], x.p[:, made], atol=2e-3)
     np.testing.assert_allclose(back.values.f[:, made], xv.f[:, made], rtol=5e-3, atol=1e-12)
+
+
+def test_spectral_mlt_agrees_with_spectral_bdpt():
+    """The wavelengths are part of a path's state: a spectral render's luminance (Y of its XYZ film) agrees
+    with spectral BDPT's, on a box with measured spectra."""
+    s = scene("cornell-box-measured")
+    results = [ps.render(s, "mlt", spp=16, seed=20 + k, spectral=True, max_depth=MAX_DEPTH, chains=2048,
+                         bootstrap=1 << 13) for k in range(4)]
+    assert all(r.stats["mode"] == "spectral" for r in results)
+    ref = ps.render(s, "bdpt", spp=512, seed=1, spectral=True, max_depth=MAX_DEPTH)
+    y = np.array([r.xyz[..., 1].mean() for r in results])
+    ref_y = ref.xyz[..., 1].mean()
+    ref_error = np.sqrt(ref.film.variance(np.array([[0.0, 1.0, 0.0]])).sum()) / ref.xyz[..., 1].size
+    error = np.sqrt(y.var(ddof=1) / y.size + ref_error ** 2)
+    assert error < 0.01 * ref_y, "too noisy to test"
+    assert abs(y.mean() - ref_y) < 4 * error + 0.005 * ref_y, (y, ref_y, error)

@@ -27,10 +27,11 @@ each chain's splats are scaled by P b_L / (chains of its length), as in
 :mod:`pathspace.estimators.metropolis`, whose expected-value splatting and
 statistics it shares.  Chains change length freely.
 
-Scope: RGB renders of scenes lit by area lights and seen by a pinhole
-camera (the camera vertex is never mutated); for point, spot, directional or
-environment lights, a thin lens or spectral renders use ``mmlt`` or
-``pssmlt``.
+Spectral renders carry each path's wavelengths as one more number of the
+state (moved by a small step with every bidirectional mutation).  Scope:
+scenes lit by area lights and seen by a pinhole camera (the camera vertex is
+never mutated); for point, spot, directional or environment lights or a thin
+lens use ``mmlt`` or ``pssmlt``.
 """
 from __future__ import annotations
 
@@ -50,7 +51,7 @@ from .metropolis import (CONTRIBUTIONS, Proposal, Splatting, chain_statistics, c
                          uniform_stream)
 from . import path_mutations as mutations
 from .path_mutations import ADD_SPREAD, Lengths, Proposed, fresh_paths
-from .paths import Paths, PathValues
+from .paths import Paths, PathValues, Space
 
 __all__ = ["MLT", "PathChains"]
 
@@ -77,25 +78,25 @@ class Bootstrap:
 class PathChains(Splatting):
     """Path-space chains: their paths, values, and one mutation of every chain per :meth:`step_all`."""
 
-    def __init__(self, scene, estimator: "MLT", contribution, start: Bootstrap, scale: np.ndarray, pixels: int,
+    def __init__(self, space: Space, estimator: "MLT", contribution, start: Bootstrap, scale: np.ndarray, pixels: int,
                  uniforms) -> None:
         super().__init__(scale, pixels, 3, MUTATIONS)
-        self.scene, self.lengths, self.contribution, self.uniforms = scene, estimator.lengths, contribution, uniforms
+        self.space, self.lengths, self.contribution, self.uniforms = space, estimator.lengths, contribution, uniforms
         self.cdf = np.cumsum(estimator.weights)
         self.paths, self.values = start.paths, start.values
         self.f = contribution(self.values.f)
         self.current = Proposal(np.arange(self.paths.count), self.values.pixel, self.values.f)
-        camera = scene.camera
+        camera = space.scene.camera
         self.lens_radius = (LENS_RADIUS, max(LENS_RADIUS, LENS_FRACTION * max(camera.width, camera.height)))
 
     def _mutate(self, kind: int, x: Paths, xv: PathValues) -> Proposed:
         if kind == 0:
-            return mutations.bidirectional(self.scene, self.lengths, x, xv, self.uniforms)
+            return mutations.bidirectional(self.space, self.lengths, x, xv, self.uniforms)
         if kind == 1:
-            return mutations.lens(self.scene, x, xv, self.uniforms, self.lens_radius)
+            return mutations.lens(self.space, x, xv, self.uniforms, self.lens_radius)
         if kind == 2:
-            return mutations.caustic(self.scene, x, xv, self.uniforms, CAUSTIC_ANGLE)
-        return mutations.multichain(self.scene, x, xv, self.uniforms, self.lens_radius, CAUSTIC_ANGLE)
+            return mutations.caustic(self.space, x, xv, self.uniforms, CAUSTIC_ANGLE)
+        return mutations.multichain(self.space, x, xv, self.uniforms, self.lens_radius, CAUSTIC_ANGLE)
 
     def step_all(self, image: np.ndarray, counters: Counters) -> None:
         """One mutation of every chain, splatting into ``image`` (3, pixels)."""
@@ -210,16 +211,14 @@ class MLT(Estimator):
     def render(self, job: RenderJob, budget: Budget, on_checkpoint=None) -> None:
         """Bootstrap, then passes of ceil(pixels / chains) steps of every chain plus one BDPT pass of the direct
         paths, until the budget is spent."""
-        if job.mode.name != "rgb":
-            raise ValueError("estimator 'mlt': path-space MLT renders in RGB only; use 'mmlt' or 'pssmlt' for "
-                             "spectral renders")
         film, control = job.film, job.control
         control.deadline = budget.seconds
         pixels = film.pixel_count
         contribution = contribution_function(self.contribution, job.mode)
         stats = job.stats.setdefault("metropolis", {})
         try:
-            boot = self._bootstrap(job.scene, contribution, uniform_stream(job, (_BOOTSTRAP, budget.first_pass)),
+            space = Space(job.scene, job.mode)
+            boot = self._bootstrap(space, contribution, uniform_stream(job, (_BOOTSTRAP, budget.first_pass)),
                                    job.counters, control.check)
         except Interrupted:
             return
@@ -232,7 +231,7 @@ class MLT(Estimator):
         per_class = np.bincount(boot.label, minlength=boot.brightness.size)
         if boot.label.size:
             scale = pixels * boot.brightness.take(boot.label) / per_class.take(boot.label)
-            chains = PathChains(job.scene, self, contribution, boot, scale, pixels,
+            chains = PathChains(space, self, contribution, boot, scale, pixels,
                                 uniform_stream(job, (_CHAINS, budget.first_pass)))
         steps = -(-pixels // max(boot.label.size, 1)) if chains is not None else 0
 
@@ -260,19 +259,19 @@ class MLT(Estimator):
         return np.stack([np.bincount(found.pixel, weights=found.weighted[c], minlength=pixels)
                          for c in range(job.film.channels)])
 
-    def _bootstrap(self, scene, contribution, uniforms, counters: Counters, check) -> Bootstrap:
+    def _bootstrap(self, space: Space, contribution, uniforms, counters: Counters, check) -> Bootstrap:
         """b_L with its standard error per path length, and the chains' starts (see the module docstring)."""
         first = self.direct + 1
         classes = self.max_depth - first + 1
         sums = np.zeros((classes, GROUPS))
         picks = []
-        for label in range(classes if scene.lights.count else 0):
+        for label in range(classes if space.scene.lights.count else 0):
             length = first + label
             reservoir: dict = {"total": 0.0, "paths": None}
             for start in range(0, self.bootstrap, BATCH):
                 check()
                 count = min(BATCH, self.bootstrap - start)
-                paths, values, density = fresh_paths(scene, np.full(count, length), length + 1, uniforms)
+                paths, values, density = fresh_paths(space, np.full(count, length), length + 1, uniforms)
                 with np.errstate(divide="ignore", invalid="ignore"):
                     weighted = np.where(density > 0, values.f / density, 0.0)
                 c = contribution(weighted)
@@ -285,9 +284,9 @@ class MLT(Estimator):
         per_group = self.bootstrap / GROUPS
         brightness = sums.sum(axis=1) / self.bootstrap
         standard_error = (sums / per_group).std(axis=1, ddof=1) / np.sqrt(GROUPS)
-        return self._starts(scene, brightness, standard_error, picks)
+        return self._starts(space, brightness, standard_error, picks)
 
-    def _starts(self, scene, brightness, standard_error, picks: list) -> Bootstrap:
+    def _starts(self, space: Space, brightness, standard_error, picks: list) -> Bootstrap:
         """Share the chains out among the lengths and gather their starting paths."""
         from .paths import evaluate
 
@@ -300,11 +299,12 @@ class MLT(Estimator):
                 chosen = picks[label].take(np.arange(count))
                 width = chosen.slots
                 paths.k[row:row + count] = chosen.k
+                paths.wavelength_number[row:row + count] = chosen.wavelength_number
                 for name in Paths.FIELDS:
                     getattr(paths, name)[..., row:row + count, :width] = getattr(chosen, name)
                 labels.append(np.full(count, label))
                 row += count
-        return Bootstrap(brightness, standard_error, paths, evaluate(scene, paths) if row else None,
+        return Bootstrap(brightness, standard_error, paths, evaluate(space, paths) if row else None,
                          np.concatenate(labels) if labels else np.zeros(0, np.int64))
 
 

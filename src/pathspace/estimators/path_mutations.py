@@ -57,13 +57,15 @@ import numpy as np
 from ..vecmath import orthonormal_basis
 from .path_walks import (Uniforms, bsdf_direction, camera_direction, emission_direction, light_points, lobe_numbers,
                          unit, walk)
-from .paths import Paths, PathValues, evaluate
+from .paths import Paths, PathValues, Space, evaluate
+from .primary import SmallStep
 from .visibility import segment_blocked
 
 __all__ = ["ADD_SPREAD", "Lengths", "Proposed", "generation_density", "bidirectional", "lens", "lens_to", "caustic",
            "caustic_toward", "multichain", "multichain_to", "fresh_paths"]
 
 ADD_SPREAD = 2   # k_a differs from k_d by at most this
+WAVELENGTH_STEP = SmallStep("exponential", 1.0 / 64.0)   # how bidirectional mutations move the wavelengths
 
 
 @dataclass
@@ -144,11 +146,13 @@ def generation_density(values: PathValues, first: np.ndarray, count: np.ndarray)
     return total / (count + 1)
 
 
-def _regenerate(scene, y: Paths, lanes: np.ndarray, light_end: np.ndarray, light_steps: np.ndarray,
+def _regenerate(space: Space, y: Paths, lanes: np.ndarray, light_end: np.ndarray, light_steps: np.ndarray,
                 camera_end: np.ndarray, camera_steps: np.ndarray, uniforms: Uniforms) -> np.ndarray:
     """Fill the gap of paths ``lanes`` of ``y`` between slot ``light_end`` (-1: a fresh light vertex is made) and
     slot ``camera_end``: ``light_steps`` vertices by a walk from the light side, ``camera_steps`` from the camera
     side (all (n,)), joined by a shadow ray.  Returns whether each succeeded."""
+    scene = space.scene
+    _, colours = space.colours(y.wavelength_number.take(lanes))
     ok = np.ones(lanes.size, bool)
     # The walk from the light side.
     go = np.flatnonzero(light_steps > 0)
@@ -169,9 +173,9 @@ def _regenerate(scene, y: Paths, lanes: np.ndarray, light_end: np.ndarray, light
             rows = lanes.take(go.take(surface))
             arriving = unit(y.p[:, rows, end[surface]] - y.p[:, rows, end[surface] - 1])
             direction[:, surface] = bsdf_direction(scene, _part(start, surface), arriving, "importance",
-                                                   u[:3, surface])
+                                                   u[:3, surface], colours.take(go.take(surface)))
         steps = light_steps.take(go) - (end < 0)
-        made, walked = walk(scene, start, direction, steps, "importance", uniforms)
+        made, walked = walk(scene, start, direction, steps, "importance", uniforms, colours.take(go))
         ok[go[~walked]] = False
         first = np.maximum(end, -1) + 1 + (end < 0)
         row, col = np.nonzero(np.arange(made.slots)[None, :] < steps[:, None])
@@ -190,8 +194,9 @@ def _regenerate(scene, y: Paths, lanes: np.ndarray, light_end: np.ndarray, light
         if surface.size:
             here, after = end.take(surface), rows.take(surface)
             arriving = unit(y.p[:, after, here] - y.p[:, after, here + 1])
-            direction[:, surface] = bsdf_direction(scene, _part(start, surface), arriving, "radiance", u[:, surface])
-        made, walked = walk(scene, start, direction, camera_steps.take(go), "radiance", uniforms)
+            direction[:, surface] = bsdf_direction(scene, _part(start, surface), arriving, "radiance", u[:, surface],
+                                                   colours.take(go.take(surface)))
+        made, walked = walk(scene, start, direction, camera_steps.take(go), "radiance", uniforms, colours.take(go))
         ok[go[~walked]] = False
         row, col = np.nonzero(np.arange(made.slots)[None, :] < camera_steps.take(go)[:, None])
         y.put(rows.take(row), end.take(row) - 1 - col, made.vertex(row, col))
@@ -201,7 +206,7 @@ def _regenerate(scene, y: Paths, lanes: np.ndarray, light_end: np.ndarray, light
     if need.size:
         rows = lanes.take(need)
         a, b = y.vertex(rows, join.take(need)), y.vertex(rows, join.take(need) + 1)
-        ok[need[~_visible(scene, a, b)]] = False
+        ok[need[~_visible(space.scene, a, b)]] = False
     return ok & (y.entity[lanes, 0] >= 0)
 
 
@@ -220,27 +225,29 @@ def _part(vertex: dict, idx: np.ndarray) -> dict:
     return {name: np.take(value, idx, axis=-1) for name, value in vertex.items()}
 
 
-def fresh_paths(scene, length: np.ndarray, slots: int, uniforms: Uniforms) -> tuple[Paths, PathValues, np.ndarray]:
+def fresh_paths(space: Space, length: np.ndarray, slots: int, uniforms: Uniforms) -> tuple[Paths, PathValues, np.ndarray]:
     """Independent paths of ``length`` segments, each made by a light walk of j vertices and a camera walk of the
     rest, j uniform: (paths, their values, their density (1 / (L + 1)) sum_j p_j; 0 where none was made)."""
     count = length.size
     lanes = np.arange(count)
     y = Paths.empty(count, slots)
     y.k[:] = length
-    camera = scene.camera
+    if space.spectral:
+        y.wavelength_number = uniforms(count)
+    camera = space.scene.camera
     y.put(lanes, length, dict(p=np.repeat(camera.position.astype(np.float32)[:, None], count, axis=1),
                               n=np.repeat(camera.forward.astype(np.float32)[:, None], count, axis=1),
                               eps=np.zeros(count, np.float32), material=np.full(count, -1, np.int64),
                               entity=np.full(count, -1, np.int64)))
     light = np.minimum((uniforms(count) * (length + 1)).astype(np.int64), length)
-    ok = _regenerate(scene, y, lanes, np.full(count, -1), light, length, length - light, uniforms)
+    ok = _regenerate(space, y, lanes, np.full(count, -1), light, length, length - light, uniforms)
     y.k[~ok] = 0
-    values = evaluate(scene, y)
+    values = evaluate(space, y)
     density = np.where(ok, generation_density(values, np.zeros(count, np.int64), length), 0.0)
     return y, values, density
 
 
-def bidirectional(scene, lengths: Lengths, x: Paths, xv: PathValues, uniforms: Uniforms) -> Proposed:
+def bidirectional(space: Space, lengths: Lengths, x: Paths, xv: PathValues, uniforms: Uniforms) -> Proposed:
     """Veach's bidirectional mutation of paths ``x`` (see the module docstring)."""
     count, slots = x.count, x.slots
     k = x.k
@@ -256,6 +263,7 @@ def bidirectional(scene, lengths: Lengths, x: Paths, xv: PathValues, uniforms: U
     # y keeps x_0 .. x_l and x_m .. x_k, with the new vertices between.
     y = Paths.empty(count, slots)
     y.k = np.where(fits, k_new, 0)
+    y.wavelength_number = _moved_wavelengths(space, x.wavelength_number, uniforms)
     slot = np.arange(slots)[None, :]
     gap_end = (l + new + 1)[:, None]                    # y's slot of x_m
     source = np.where(slot <= l[:, None], slot,
@@ -264,16 +272,24 @@ def bidirectional(scene, lengths: Lengths, x: Paths, xv: PathValues, uniforms: U
     y.put(row, col, x.vertex(row, source[row, col]))
     go = np.flatnonzero(fits)
     ok = np.zeros(count, bool)
-    ok[go] = _regenerate(scene, y, go, l.take(go), light.take(go), (l + new + 1).take(go), (new - light).take(go),
+    ok[go] = _regenerate(space, y, go, l.take(go), light.take(go), (l + new + 1).take(go), (new - light).take(go),
                          uniforms)
     y.k[~ok] = 0
-    yv = evaluate(scene, y)
+    yv = evaluate(space, y)
     forward = lengths.p_deletion(k, kd) * lengths.p_addition(kd, ka) * generation_density(yv, l + 1, new)
     backward = (lengths.p_deletion(np.where(ok, k_new, 1), np.where(ok, ka, 1)) * lengths.p_addition(ka, kd)
                 * generation_density(xv, l + 1, kd - 1))
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(ok & (forward > 0), backward / forward, 0.0)
     return Proposed(y, yv, np.where(np.isfinite(ratio), ratio, 0.0))
+
+
+def _moved_wavelengths(space: Space, numbers: np.ndarray, uniforms: Uniforms) -> np.ndarray:
+    """Spectral renders: the wavelength numbers after a symmetric small step on [0, 1) (Kelemen's exponential
+    kernel), so that the chains explore the wavelengths too; T is unchanged in ratio.  RGB: as they are."""
+    if not space.spectral:
+        return numbers
+    return (numbers + WAVELENGTH_STEP.steps(np.ones(numbers.size, np.int64), uniforms)) % 1.0
 
 
 def _exponential(u: np.ndarray, low: float, high: float) -> np.ndarray:
@@ -309,31 +325,33 @@ def _same_specular_chain(x: Paths, y: Paths, lanes: np.ndarray, low: np.ndarray,
     return (~inside | (same & specular)).all(axis=1)
 
 
-def lens(scene, x: Paths, xv: PathValues, uniforms: Uniforms, radius: tuple[float, float]) -> Proposed:
+def lens(space: Space, x: Paths, xv: PathValues, uniforms: Uniforms, radius: tuple[float, float]) -> Proposed:
     """Veach's lens perturbation of paths ``x``; ``radius`` (r1, r2) in pixels (see the module docstring)."""
     u = uniforms(2 * x.count).reshape(2, x.count)
     r, phi = _exponential(u[0], *radius), 2.0 * np.pi * u[1]
-    return lens_to(scene, x, xv, xv.raster + r * np.stack((np.cos(phi), np.sin(phi))), uniforms)
+    return lens_to(space, x, xv, xv.raster + r * np.stack((np.cos(phi), np.sin(phi))), uniforms)
 
 
-def lens_to(scene, x: Paths, xv: PathValues, raster: np.ndarray, uniforms: Uniforms) -> Proposed:
+def lens_to(space: Space, x: Paths, xv: PathValues, raster: np.ndarray, uniforms: Uniforms) -> Proposed:
     """The lens perturbation of paths ``x`` that moves their film positions to ``raster`` (2, n)."""
     k = x.k
     lanes = np.arange(x.count)
     j = _specular_run(xv, k, k)
     usable = (k >= 1) & ((j == 0) | ~xv.delta[lanes, np.maximum(j - 1, 0)])
-    y, ok = _camera_chain(scene, x, j, usable, raster, uniforms)
-    yv = evaluate(scene, y)
+    y, ok = _camera_chain(space, x, j, usable, raster, uniforms)
+    yv = evaluate(space, y)
     ok &= _same_specular_chain(x, y, lanes, j + 1, k, yv.delta) & ~yv.delta[lanes, j]
-    ok &= _joined(scene, x, y, ok, j)
+    ok &= _joined(space, x, y, ok, j)
     return _perturbed(y, yv, ok, _jacobian(xv, k, j, k, "rev"), _jacobian(yv, k, j, k, "rev"))
 
 
-def _camera_chain(scene, x: Paths, j: np.ndarray, usable: np.ndarray, raster: np.ndarray,
+def _camera_chain(space: Space, x: Paths, j: np.ndarray, usable: np.ndarray, raster: np.ndarray,
                   uniforms: Uniforms) -> tuple[Paths, np.ndarray]:
     """A copy of paths ``x`` whose vertices j .. k-1 are remade by a walk from the camera through film positions
     ``raster`` (2, n) following x's specular lobes, where ``usable``; and whether the walk made them."""
     count, k = x.count, x.k
+    scene = space.scene
+    _, colours = space.colours(x.wavelength_number)
     camera = scene.camera
     inside = (raster[0] >= 0) & (raster[0] < camera.width) & (raster[1] >= 0) & (raster[1] < camera.height)
     go = np.flatnonzero(usable & inside)
@@ -344,21 +362,21 @@ def _camera_chain(scene, x: Paths, j: np.ndarray, usable: np.ndarray, raster: np
         chain = k.take(go)[:, None] - 1 - np.arange(int(steps.max()))[None, :]      # the slots the walk makes
         lobes = _lobes(x, go, np.where(chain > j.take(go)[:, None], chain, -1))
         made, walked = walk(scene, x.vertex(go, k.take(go)), camera_direction(scene, raster[:, go]), steps,
-                            "radiance", uniforms, lobes)
+                            "radiance", uniforms, colours.take(go), lobes)
         row, col = np.nonzero(np.arange(made.slots)[None, :] < steps[:, None])
         y.put(go.take(row), k.take(go).take(row) - 1 - col, made.vertex(row, col))
         ok[go] = walked
     return y, ok
 
 
-def _joined(scene, x: Paths, y: Paths, ok: np.ndarray, j: np.ndarray) -> np.ndarray:
+def _joined(space: Space, x: Paths, y: Paths, ok: np.ndarray, j: np.ndarray) -> np.ndarray:
     """Where ``ok``: whether y's new vertex j joins x's kept vertex j - 1 (x_0 -- a light -- needs no join, but
     must be on an emitter)."""
     joined = ok & (y.entity[:, 0] >= 0)
     need = np.flatnonzero(joined & (j >= 1))
     if need.size:
         a, b = x.vertex(need, j.take(need) - 1), y.vertex(need, j.take(need))
-        joined[need[~_visible(scene, a, b)]] = False
+        joined[need[~_visible(space.scene, a, b)]] = False
     return joined
 
 
@@ -374,7 +392,7 @@ def _multichain_source(x: Paths, xv: PathValues) -> tuple[np.ndarray, np.ndarray
     return j, i, usable
 
 
-def multichain(scene, x: Paths, xv: PathValues, uniforms: Uniforms, radius: tuple[float, float],
+def multichain(space: Space, x: Paths, xv: PathValues, uniforms: Uniforms, radius: tuple[float, float],
                angle: tuple[float, float]) -> Proposed:
     """Veach's multi-chain perturbation of paths ``x``: a lens perturbation to a new x_j, then the direction
     leaving it toward the light turned as by a caustic perturbation (see the module docstring)."""
@@ -384,32 +402,32 @@ def multichain(scene, x: Paths, xv: PathValues, uniforms: Uniforms, radius: tupl
     r, phi = _exponential(u[0], *radius), 2.0 * np.pi * u[1]
     raster = xv.raster + r * np.stack((np.cos(phi), np.sin(phi)))
     here = np.where(usable, j, 1)
-    return multichain_to(scene, x, xv, raster, _turned(unit(x.p[:, lanes, here - 1] - x.p[:, lanes, here]),
+    return multichain_to(space, x, xv, raster, _turned(unit(x.p[:, lanes, here - 1] - x.p[:, lanes, here]),
                                                        u[2:], angle), uniforms)
 
 
-def multichain_to(scene, x: Paths, xv: PathValues, raster: np.ndarray, direction: np.ndarray,
+def multichain_to(space: Space, x: Paths, xv: PathValues, raster: np.ndarray, direction: np.ndarray,
                   uniforms: Uniforms) -> Proposed:
     """The multi-chain perturbation of paths ``x`` to film positions ``raster`` (2, n) that leaves the new x_j
     along unit ``direction`` (3, n) toward the light."""
     k = x.k
     lanes = np.arange(x.count)
     j, i, usable = _multichain_source(x, xv)
-    y, ok = _camera_chain(scene, x, j, usable, raster, uniforms)
+    y, ok = _camera_chain(space, x, j, usable, raster, uniforms)
     go = np.flatnonzero(ok)
     if go.size:
         jg, steps = j.take(go), (j - i).take(go)
         chain = jg[:, None] - 1 - np.arange(int(steps.max()))[None, :]
         lobes = _lobes(x, go, np.where(chain > i.take(go)[:, None], chain, -1))
-        made, walked = walk(scene, y.vertex(go, jg), direction[:, go].astype(np.float32), steps, "importance",
-                            uniforms, lobes)
+        made, walked = walk(space.scene, y.vertex(go, jg), direction[:, go].astype(np.float32), steps, "importance",
+                            uniforms, space.colours(x.wavelength_number.take(go))[1], lobes)
         row, col = np.nonzero(np.arange(made.slots)[None, :] < steps[:, None])
         y.put(go.take(row), jg.take(row) - 1 - col, made.vertex(row, col))
         ok[go] = walked
-    yv = evaluate(scene, y)
+    yv = evaluate(space, y)
     ok &= (_same_specular_chain(x, y, lanes, j + 1, k, yv.delta) & _same_specular_chain(x, y, lanes, i + 1, j, yv.delta)
            & ~yv.delta[lanes, j] & ~yv.delta[lanes, i])
-    ok &= _joined(scene, x, y, ok, i)
+    ok &= _joined(space, x, y, ok, i)
     return _perturbed(y, yv, ok, _jacobian(xv, k, i, k, "rev"), _jacobian(yv, k, i, k, "rev"))
 
 
@@ -429,7 +447,7 @@ def _caustic_source(x: Paths, xv: PathValues) -> tuple[np.ndarray, np.ndarray]:
     return _specular_run(xv, k, last), (k >= 2) & ~xv.delta[np.arange(x.count), last]
 
 
-def caustic(scene, x: Paths, xv: PathValues, uniforms: Uniforms, angle: tuple[float, float]) -> Proposed:
+def caustic(space: Space, x: Paths, xv: PathValues, uniforms: Uniforms, angle: tuple[float, float]) -> Proposed:
     """Veach's caustic perturbation of paths ``x``; ``angle`` (theta1, theta2) in radians (see the module
     docstring)."""
     j, usable = _caustic_source(x, xv)
@@ -438,10 +456,10 @@ def caustic(scene, x: Paths, xv: PathValues, uniforms: Uniforms, angle: tuple[fl
     next_slot = np.where(usable, j + 1, 0)
     w = unit(x.p[:, lanes, next_slot] - x.p[:, lanes, np.where(usable, j, 0)])
     w = np.where(usable, w, np.array([[0.0], [0.0], [1.0]]))
-    return caustic_toward(scene, x, xv, _turned(w, u, angle), uniforms)
+    return caustic_toward(space, x, xv, _turned(w, u, angle), uniforms)
 
 
-def caustic_toward(scene, x: Paths, xv: PathValues, direction: np.ndarray, uniforms: Uniforms) -> Proposed:
+def caustic_toward(space: Space, x: Paths, xv: PathValues, direction: np.ndarray, uniforms: Uniforms) -> Proposed:
     """The caustic perturbation of paths ``x`` that sends the light leaving x_j along unit ``direction`` (3, n)."""
     count = x.count
     lanes = np.arange(count)
@@ -456,17 +474,17 @@ def caustic_toward(scene, x: Paths, xv: PathValues, direction: np.ndarray, unifo
         steps = (k - 1 - j).take(go)
         chain = jg[:, None] + 1 + np.arange(int(steps.max()))[None, :]
         lobes = _lobes(x, go, np.where(chain < last.take(go)[:, None], chain, -1))
-        made, walked = walk(scene, x.vertex(go, jg), direction[:, go].astype(np.float32), steps, "importance",
-                            uniforms, lobes)
+        made, walked = walk(space.scene, x.vertex(go, jg), direction[:, go].astype(np.float32), steps, "importance",
+                            uniforms, space.colours(x.wavelength_number.take(go))[1], lobes)
         row, col = np.nonzero(np.arange(made.slots)[None, :] < steps[:, None])
         y.put(go.take(row), jg.take(row) + 1 + col, made.vertex(row, col))
         ok[go] = walked
-    yv = evaluate(scene, y)
+    yv = evaluate(space, y)
     ok &= _same_specular_chain(x, y, lanes, j + 1, last, yv.delta) & ~yv.delta[lanes, last]
     seen = np.flatnonzero(ok)
     if seen.size:
         a, b = y.vertex(seen, last.take(seen)), y.vertex(seen, k.take(seen))
-        ok[seen[~_visible(scene, a, b)]] = False
+        ok[seen[~_visible(space.scene, a, b)]] = False
     return _perturbed(y, yv, ok, _jacobian(xv, k, j + 1, k, "fwd"), _jacobian(yv, k, j + 1, k, "fwd"))
 
 

@@ -45,12 +45,12 @@ def lobe_numbers(prev: np.ndarray, here: np.ndarray, nxt: np.ndarray, normal: np
     return np.where(side > 0, REFLECT, TRANSMIT)
 
 
-def bsdf_direction(scene, vertex: dict, arriving: np.ndarray, mode: str, u: np.ndarray) -> np.ndarray:
+def bsdf_direction(scene, vertex: dict, arriving: np.ndarray, mode: str, u: np.ndarray, colours) -> np.ndarray:
     """Directions (3, n) float32 sampled from the BSDFs at surface ``vertex`` (fields of
-    :meth:`Paths.vertex`) for light or importance arriving along unit ``arriving`` (3, n); zero where the
-    sample failed.  ``u`` (3, n)."""
+    :meth:`Paths.vertex`) for light or importance arriving along unit ``arriving`` (3, n), with the lanes'
+    ``colours`` (dispersion follows the hero wavelength); zero where the sample failed.  ``u`` (3, n)."""
     surface = Surface.facing(vertex["n"], arriving.astype(np.float32))
-    sample = MaterialLanes(scene.materials, vertex["material"], RGBColours, OPTIONS).sample(surface, u, mode)
+    sample = MaterialLanes(scene.materials, vertex["material"], colours, OPTIONS).sample(surface, u, mode)
     return np.where(sample.weight.max(axis=0) > 0, sample.wi, np.float32(0))
 
 
@@ -80,11 +80,11 @@ def light_points(scene, u: np.ndarray) -> tuple[dict, np.ndarray]:
     return vertex, e.direction.astype(np.float32)
 
 
-def walk(scene, start: dict, direction: np.ndarray, steps: np.ndarray, mode: str, uniforms: Uniforms,
+def walk(scene, start: dict, direction: np.ndarray, steps: np.ndarray, mode: str, uniforms: Uniforms, colours,
          lobes: np.ndarray | None = None) -> tuple[Paths, np.ndarray]:
-    """Walks of ``steps`` (n,) vertices from vertices ``start`` along ``direction`` (3, n), sampling the BSDF at
-    every vertex but the last: (the vertices reached, as slots 0 .. steps-1 of a :class:`Paths` whose ``k`` is
-    unused; whether each walk made all its vertices).  ``lobes`` (n, steps.max()): the first BSDF number of
+    """Walks of ``steps`` (n,) vertices from vertices ``start`` along ``direction`` (3, n), sampling the BSDF (with
+    the lanes' ``colours``) at every vertex but the last: (the vertices reached, as slots 0 .. steps-1 of a
+    :class:`Paths` whose ``k`` is unused; whether each walk made all its vertices).  ``lobes`` (n, steps.max()): the first BSDF number of
     the scattering at each vertex of the walk (perturbations), else drawn."""
     count = steps.size
     span = int(steps.max(initial=0))
@@ -113,7 +113,7 @@ def walk(scene, start: dict, direction: np.ndarray, steps: np.ndarray, mode: str
         u = uniforms(3 * active.size).reshape(3, active.size)
         if lobes is not None:
             u[0] = lobes[active, step]
-        wi = bsdf_direction(scene, here, np.take(direction, active, axis=1), mode, u)
+        wi = bsdf_direction(scene, here, np.take(direction, active, axis=1), mode, u, colours.take(active))
         moving = dot(wi, wi) > 0
         ok[active[~moving]] = False
         active, wi = active[moving], wi[:, moving]

@@ -28,18 +28,24 @@ is the lobe's probability (as :meth:`pathspace.bsdfs.MaterialLanes.sample`
 reports them); ratios of f and of densities of paths with the same specular
 vertices are then exact.  Edges are assumed unoccluded: whoever builds a
 path traces or tests every segment it makes.
+
+In spectral renders (:class:`Space` with a spectral mode) a path's
+wavelengths are drawn from its ``wavelength_number``; f is evaluated at them
+(a dispersive interface keeps only the hero wavelength) and turned into XYZ
+film values, so f / p is still a sample of the film.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from ..bsdfs import MaterialLanes, Surface
-from ..spectra import RGBColours
+from ..spectra import RGBColours, RGBMode
 from ..vecmath import dot
+from .wavefront import Lanes
 
-__all__ = ["Paths", "PathValues", "evaluate", "delta_lobe", "OPTIONS"]
+__all__ = ["Paths", "PathValues", "Space", "evaluate", "delta_lobe", "OPTIONS"]
 
 # BSDF options of the paths' materials (cosine-weighted diffuse sampling).
 OPTIONS = {"diffuse_sampling": "cosine"}
@@ -49,11 +55,34 @@ _LOBE_NUMBERS = (0.0, 1.0 - 2.0 ** -20)   # the first BSDF number picking the fi
 
 
 @dataclass
+class Space:
+    """What paths live in: the ``scene`` and the colour ``mode`` (RGB, or spectral with the path's wavelengths
+    drawn from one number per path, :attr:`Paths.wavelength_number`)."""
+
+    scene: object
+    mode: object = field(default_factory=RGBMode)
+
+    @property
+    def spectral(self) -> bool:
+        """Whether paths carry wavelengths."""
+        return self.mode.name != "rgb"
+
+    def colours(self, numbers: np.ndarray):
+        """(colour state (a :class:`Lanes` of the mode's path fields, or None in RGB), colour model) of paths with
+        wavelength ``numbers`` (N,)."""
+        if not self.spectral:
+            return None, RGBColours
+        state = Lanes(self.mode.path_fields, **self.mode.start(numbers[None, :]))
+        return state, self.mode.colours(state)
+
+
+@dataclass
 class Paths:
     """One path per lane: ``k`` (N,) segments; per vertex slot (N, K): ``p`` and ``n`` (3, N, K) float32 position
     and geometric normal (the light's normal at vertex 0, the camera axis at vertex k), ``eps`` ray-offset
     bound, ``material`` (-1 at the light and camera vertices) and ``entity`` (the light entity of vertex 0 and
-    of surface vertices on emitters, else -1)."""
+    of surface vertices on emitters, else -1); ``wavelength_number`` (N,): the uniform number that draws the
+    path's wavelengths in spectral renders (part of the state; unused in RGB)."""
 
     k: np.ndarray
     p: np.ndarray
@@ -61,15 +90,16 @@ class Paths:
     eps: np.ndarray
     material: np.ndarray
     entity: np.ndarray
+    wavelength_number: np.ndarray
 
-    FIELDS = ("p", "n", "eps", "material", "entity")
+    FIELDS = ("p", "n", "eps", "material", "entity")   # per vertex slot
 
     @classmethod
     def empty(cls, count: int, slots: int) -> "Paths":
         """``count`` paths of no segments with ``slots`` vertex slots each."""
         return cls(np.zeros(count, np.int64), np.zeros((3, count, slots), np.float32),
                    np.zeros((3, count, slots), np.float32), np.zeros((count, slots), np.float32),
-                   np.full((count, slots), -1, np.int64), np.full((count, slots), -1, np.int64))
+                   np.full((count, slots), -1, np.int64), np.full((count, slots), -1, np.int64), np.zeros(count))
 
     @property
     def count(self) -> int:
@@ -94,11 +124,12 @@ class Paths:
     def take(self, lanes: np.ndarray, slots: int | None = None) -> "Paths":
         """The paths ``lanes``, with their first ``slots`` vertex slots (default: all)."""
         return Paths(self.k.take(lanes), *(np.take(getattr(self, name)[..., :slots], lanes, axis=-2)
-                                           for name in self.FIELDS))
+                                           for name in self.FIELDS), self.wavelength_number.take(lanes))
 
     def assign(self, lanes: np.ndarray, other: "Paths") -> None:
         """Paths ``lanes`` become ``other``'s (one each; ``other`` may have fewer vertex slots)."""
         self.k[lanes] = other.k
+        self.wavelength_number[lanes] = other.wavelength_number
         for name in self.FIELDS:
             getattr(self, name)[..., lanes, :other.slots] = getattr(other, name)
 
@@ -137,43 +168,51 @@ class PathValues:
 
 
 def delta_lobe(materials: MaterialLanes, surface: Surface, toward: np.ndarray, mode: str):
-    """(f |cos| (C, n), probability (n,)) of the delta lobe of each lane's specular material that scatters light
-    seen as ``surface`` toward unit ``toward`` (3, n): the lobe's weight times its probability, and its
-    probability; zero where no lobe goes there."""
+    """(f |cos| (C, n), probability (n,), terminated (n,)) of the delta lobe of each lane's specular material that
+    scatters light seen as ``surface`` toward unit ``toward`` (3, n): the lobe's weight times its probability,
+    its probability (zero where no lobe goes there), and whether it kept only the hero wavelength (dispersion)."""
     count = toward.shape[1]
     f_cos, probability = np.zeros((materials.channels, count)), np.zeros(count)
+    terminated = np.zeros(count, bool)
     for first in _LOBE_NUMBERS:
         u = np.vstack((np.full(count, first), np.full((2, count), 0.5)))
         sample = materials.sample(surface, u, mode)
         match = (dot(sample.wi.astype(np.float64), toward) > SAME_DIRECTION) & (sample.pdf > 0)
         f_cos = np.where(match, sample.weight * sample.pdf, f_cos)
         probability = np.where(match, sample.pdf, probability)
-    return f_cos, probability
+        if sample.terminated is not None:
+            terminated |= match & sample.terminated
+    return f_cos, probability, terminated
 
 
-def _scattering(scene, material: np.ndarray, n: np.ndarray, to_prev: np.ndarray, to_next: np.ndarray):
-    """At surface vertices with ``material`` and normals ``n`` (3, n), neighbours along unit ``to_prev``
-    (toward the light end) and ``to_next`` (toward the camera): (f_s |cos toward prev| (C, n) for light
-    arriving from prev, density of sampling ``to_prev`` from the camera side, density of sampling ``to_next``
-    from the light side, specular)."""
+def _scattering(scene, colours, material: np.ndarray, n: np.ndarray, to_prev: np.ndarray, to_next: np.ndarray):
+    """At surface vertices with ``material`` and normals ``n`` (3, n) and ``colours``, neighbours along unit
+    ``to_prev`` (toward the light end) and ``to_next`` (toward the camera): (f_s |cos toward prev| (C, n) for
+    light arriving from prev, density of sampling ``to_prev`` from the camera side, density of sampling
+    ``to_next`` from the light side, specular, kept only the hero wavelength)."""
     table = scene.materials
-    materials = MaterialLanes(table, material, RGBColours, OPTIONS)
+    materials = MaterialLanes(table, material, colours, OPTIONS)
     delta = table.delta.take(material)
+    terminated = np.zeros(material.size, bool)
     from_camera = Surface.facing(n, -to_next)   # a walk from the camera arrives from the next vertex
     from_light = Surface.facing(n, -to_prev)    # a walk from the light arrives from the previous one
     f_cos, pdf_prev = materials.eval(from_camera, to_prev.astype(np.float32))
     _, pdf_next = materials.eval(from_light, to_next.astype(np.float32))
     if delta.any():
         d = np.flatnonzero(delta)
-        specular = MaterialLanes(table, material.take(d), RGBColours, OPTIONS)
-        lobe_f, lobe_prev = delta_lobe(specular, from_camera.take(d), np.take(to_prev, d, axis=1), "radiance")
-        _, lobe_next = delta_lobe(specular, from_light.take(d), np.take(to_next, d, axis=1), "importance")
+        specular = MaterialLanes(table, material.take(d), colours.take(d), OPTIONS)
+        lobe_f, lobe_prev, terminated[d] = delta_lobe(specular, from_camera.take(d), np.take(to_prev, d, axis=1),
+                                                      "radiance")
+        _, lobe_next, _ = delta_lobe(specular, from_light.take(d), np.take(to_next, d, axis=1), "importance")
         f_cos[:, d], pdf_prev[d], pdf_next[d] = lobe_f, lobe_prev, lobe_next
-    return f_cos, pdf_prev, pdf_next, delta
+    return f_cos, pdf_prev, pdf_next, delta, terminated
 
 
-def evaluate(scene, paths: Paths) -> PathValues:
-    """f(x), the film position and the vertex densities of every path (see the module docstring)."""
+def evaluate(space: Space, paths: Paths) -> PathValues:
+    """f(x) as film values, the film position and the vertex densities of every path (see the module
+    docstring)."""
+    scene = space.scene
+    state, colours = space.colours(paths.wavelength_number)
     count, slots = paths.material.shape
     lanes = np.arange(count)
     k = paths.k
@@ -192,22 +231,25 @@ def evaluate(scene, paths: Paths) -> PathValues:
         g_rev[:, :-1] = np.where(on_path & (dist2 > 0), cos_start / dist2, 0.0)
     fwd, rev = np.zeros((count, slots)), np.zeros((count, slots))
     delta = np.zeros((count, slots), bool)
-    f = np.ones((3, count))
+    f = np.ones((colours.channels, count))
     # The light: x_0's emission toward x_1, its point density and the direction's.
     entity = paths.entity[:, 0]
     w0 = np.ascontiguousarray(w[:, :, 0])
     lit = (entity >= 0) & (k >= 1)
     safe_entity = np.where(lit, entity, 0)
-    f *= np.where(lit, scene.lights.le(safe_entity, paths.n[:, :, 0], w0.astype(np.float32), RGBColours), 0.0)
+    f *= np.where(lit, scene.lights.le(safe_entity, paths.n[:, :, 0], w0.astype(np.float32), colours), 0.0)
     origin, pdf_dir = scene.lights.pdf_le(safe_entity, paths.n[:, :, 0], w0.astype(np.float32))
     fwd[:, 0] = np.where(lit, origin, 0.0)
     fwd[:, 1] = np.where(lit, pdf_dir * g_fwd[:, 1], 0.0)
     # Surface vertices x_1 .. x_{k-1}.
     row, col = np.nonzero((np.arange(slots)[None, :] >= 1) & (np.arange(slots)[None, :] < k[:, None]))
+    terminated = np.zeros(count, bool)
     if row.size:
-        f_cos, pdf_prev, pdf_next, specular = _scattering(scene, paths.material[row, col], paths.n[:, row, col],
-                                                          -w[:, row, col - 1], w[:, row, col])
-        factor = np.ones((3, count, slots))
+        f_cos, pdf_prev, pdf_next, specular, dispersed = _scattering(
+            scene, colours.take(row), paths.material[row, col], paths.n[:, row, col], -w[:, row, col - 1],
+            w[:, row, col])
+        terminated[row[dispersed]] = True
+        factor = np.ones((colours.channels, count, slots))
         factor[:, row, col] = f_cos
         f *= factor.prod(axis=2)
         rev[row, col - 1] = pdf_prev * g_rev[row, col - 1]
@@ -224,6 +266,10 @@ def evaluate(scene, paths: Paths) -> PathValues:
     f *= segments.prod(axis=1) * pdf_camera
     raster, inside = camera.raster(paths.p[:, lanes, last])
     f = np.where(inside & (k >= 1) & np.isfinite(f).all(axis=0), f, 0.0)
+    if state is not None:     # spectral: the wavelengths' radiance as XYZ film values
+        if terminated.any():
+            space.mode.terminate_secondary(state, terminated)
+        f = space.mode.to_film(f, state, lanes)
     x = np.clip(np.nan_to_num(raster[0]), 0, camera.width - 1).astype(np.int64)
     y = np.clip(np.nan_to_num(raster[1]), 0, camera.height - 1).astype(np.int64)
     return PathValues(f, raster, y * camera.width + x, fwd, rev, delta, g_fwd, g_rev)
