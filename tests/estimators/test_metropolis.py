@@ -145,6 +145,8 @@ def test_brightness_and_light_share_do_not_drift_with_the_bootstrap_size(label, 
         # Student's t with GROUPS - 1 degrees of freedom.
         ref_y, ref_error = luminance_and_error(ref)
         z = (b - ref_y) / np.sqrt(se ** 2 + ref_error ** 2)
+        dof = {r.stats["metropolis"]["brightness_degrees_of_freedom"] for r in results}
+        assert dof == {GROUPS - 1}
         assert np.abs(z).max() < stats.t.isf(ALPHA / (2 * z.size * 2), GROUPS - 1), (size, z)
     small, large = shares[1 << 13], shares[1 << 15]
     t = stats.ttest_ind(small, large, equal_var=False)

@@ -38,14 +38,17 @@ GROUPS = 8        # independent replicates for the standard error
 
 @dataclass
 class BootstrapResult:
-    """Per class: ``brightness`` b_c (mean f), its ``standard_error``, ``samples``; and the start ``numbers`` (per
-    stream, (chains, dims)) and ``label`` of the chains, drawn per class in proportion to f."""
+    """Per class: ``brightness`` b_c (mean f), its ``standard_error`` (with ``degrees_of_freedom``: the error
+    comes from that many + 1 group means, so confidence intervals take Student's t quantiles), ``samples``;
+    and the start ``numbers`` (per stream, (chains, dims)) and ``label`` of the chains, drawn per class in
+    proportion to f."""
 
     brightness: np.ndarray
     standard_error: np.ndarray
     samples: int
     numbers: dict[str, np.ndarray]
     label: np.ndarray
+    degrees_of_freedom: int
 
 
 class Strata:
@@ -120,14 +123,19 @@ def bootstrap(target, samples: int, chains: int, contribution, step: SmallStep, 
     if groups.size >= 2:
         means = sums[:, groups] / counts[groups]
         standard_error = means.std(axis=1, ddof=1) / np.sqrt(groups.size)
+        dof = int(groups.size) - 1
     else:   # a single (partial) round: the spread of all samples, which overestimates a stratified error
         variance = np.maximum(squares / samples - brightness ** 2, 0.0) * samples / max(samples - 1, 1)
         standard_error = np.sqrt(variance / samples)
-    return _starts(target, picks, brightness, standard_error, samples, chains)
+        dof = max(samples - 1, 1)
+    result = _starts(target, picks, brightness, standard_error, samples, chains)
+    result.degrees_of_freedom = dof
+    return result
 
 
 def _starts(target, picks: list[dict], brightness, standard_error, samples: int, chains: int) -> BootstrapResult:
-    """Share the chains out among the classes and stack their starting numbers."""
+    """Share the chains out among the classes and stack their starting numbers (``degrees_of_freedom`` is
+    left for the caller)."""
     per_class = allocate(brightness, chains)
     numbers: dict[str, list[np.ndarray]] = {name: [] for name in target.streams}
     labels = []
@@ -141,7 +149,7 @@ def _starts(target, picks: list[dict], brightness, standard_error, samples: int,
                                      for a in parts]) if parts else np.zeros((0, 0))
                for name, parts in numbers.items()}
     return BootstrapResult(brightness, standard_error, samples, stacked,
-                           np.concatenate(labels) if labels else np.zeros(0, np.int64))
+                           np.concatenate(labels) if labels else np.zeros(0, np.int64), 0)
 
 
 def reservoir_draw(reservoir: dict, f: np.ndarray, slots: int, uniforms) -> tuple[np.ndarray, np.ndarray] | None:

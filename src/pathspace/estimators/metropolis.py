@@ -294,6 +294,7 @@ class Metropolis(Estimator):
             return
         stats.update(bootstrap=boot.samples, brightness=float(boot.brightness.sum()),
                      brightness_standard_error=float(np.sqrt((boot.standard_error ** 2).sum())),
+                     brightness_degrees_of_freedom=boot.degrees_of_freedom,
                      class_brightness=boot.brightness.tolist(),
                      class_brightness_standard_error=boot.standard_error.tolist())
         if not boot.label.size:

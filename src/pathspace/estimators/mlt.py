@@ -225,6 +225,7 @@ class MLT(Estimator):
         direct = self.direct_estimator if job.scene.lights.count else None
         stats.update(bootstrap=self.bootstrap, brightness=float(boot.brightness.sum()),
                      brightness_standard_error=float(np.sqrt((boot.standard_error ** 2).sum())),
+                     brightness_degrees_of_freedom=GROUPS - 1,
                      class_brightness=boot.brightness.tolist(),
                      class_brightness_standard_error=boot.standard_error.tolist(), direct=self.direct)
         chains = None
