@@ -12,7 +12,7 @@ seen through glass and the ajar door, both 128x128; every estimator at the same 
 4. on the Cornell box: Metropolis mutations per second against BDPT's samples per second at the same
    thread count (target: at least 1).
 
-    python benchmarks/mlt.py [--time 40] [--reference-time 600] [--scenes caustic-glass,ajar-door]
+    python benchmarks/mlt.py [--time 40] [--reference-time 600] [--scenes caustic-glass,ajar-door] [--seeds 3]
 """
 from __future__ import annotations
 
@@ -35,12 +35,17 @@ def rel_mse(result, reference) -> float:
     return relmse(result.image, reference.image) - floor
 
 
-def time_to_target(scene, name: str, seconds: float, reference, target: float, max_depth: int, threads: int) -> dict:
+def time_to_target(scene, name: str, seconds: float, reference, target: float, max_depth: int, threads: int,
+                   seeds: int) -> dict:
+    """Renders of seconds / 4 and seconds at ``seeds`` seeds (7, 8, ...): the mean time and relMSE over the
+    seeds (Metropolis errors are heavy-tailed: a single seed can be far from typical)."""
     estimator, params = ESTIMATORS[name]
     rows = []
     for budget in (seconds / 4, seconds):
-        result = ps.render(scene, estimator, time=budget, seed=7, max_depth=max_depth, threads=threads, **params)
-        rows.append((result.stats["seconds"], rel_mse(result, reference), result))
+        results = [ps.render(scene, estimator, time=budget, seed=7 + k, max_depth=max_depth, threads=threads, **params)
+                   for k in range(seeds)]
+        rows.append((np.mean([r.stats["seconds"] for r in results]),
+                     np.mean([rel_mse(r, reference) for r in results]), results[-1]))
     (t1, e1, _), (t2, e2, last) = rows
     slope = np.log(e2 / e1) / np.log(t2 / t1) if e1 > 0 and e2 > 0 else float("nan")
     row = {"name": name, "seconds": t2, "relmse": e2, "relmse_short": e1, "slope": slope,
@@ -76,13 +81,14 @@ def main() -> None:
     parser.add_argument("--max-depth", type=int, default=10)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--estimators", default=",".join(ESTIMATORS))
+    parser.add_argument("--seeds", type=int, default=1, help="renders per budget and estimator (relMSE averaged)")
     args = parser.parse_args()
     for name in args.scenes.split(","):
         scene = ps.load_scene(ROOT / "scenes" / name / "scene.toml")
         reference = ps.render(scene, "bdpt", time=args.reference_time, seed=1, max_depth=args.max_depth,
                               threads=args.threads)
         print(f"\n{name}: reference BDPT {reference.stats['spp']} spp in {reference.stats['seconds']:.0f} s")
-        rows = [time_to_target(scene, e, args.time, reference, args.target, args.max_depth, args.threads)
+        rows = [time_to_target(scene, e, args.time, reference, args.target, args.max_depth, args.threads, args.seeds)
                 for e in args.estimators.split(",")]
         base = next((r["time_to_target"] for r in rows if r["name"] == "bdpt"), float("nan"))
         print(f"  {'estimator':12s} {'relMSE':>9s} {'(t/4)':>9s} {'slope':>6s} {'t->target':>10s} {'vs BDPT':>8s}")
