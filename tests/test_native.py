@@ -144,7 +144,9 @@ def test_broadcast_rays_and_per_ray_bounds(accel):
     origin = np.broadcast_to(np.array([[0.5], [0.5], [2.0]], np.float32), (3, 1000))
     direction = np.broadcast_to(np.array([[0.0], [0.0], [-1.0]]), (3, 1000))
     hits = accel.intersect(origin, direction, tmin=np.broadcast_to(np.float32(0.0), (1000,)))
-    assert np.all(hits.prim >= 0) and np.all(hits.t == 2.0)
+    # Every copy gets the same hit; its distance is 2 within Embree's float32 rounding (its ISA decides the
+    # last bit: 1.9999999 on some machines).
+    assert np.all(hits.prim >= 0) and np.all(hits.t == hits.t[0]) and abs(hits.t[0] - 2.0) <= 4 * 2.0 ** -23
     # tmax below tmin, and tmax = -inf, are empty intervals: misses, not errors.
     assert np.all(accel.intersect(origin, direction, 3.0, 1.0).prim == -1)
     assert not accel.occluded(origin, direction, 0.0, -np.inf).any()
