@@ -149,8 +149,8 @@ def test_bad_render_arguments(cornell_small, kwargs, match):
 
 
 def test_unknown_estimator(cornell_small):
-    with pytest.raises(ValueError, match="unknown estimator 'mlt'; available: pt"):
-        ps.render(cornell_small, "mlt")
+    with pytest.raises(ValueError, match="unknown estimator 'vcm'; available: pt"):
+        ps.render(cornell_small, "vcm")
 
 
 
