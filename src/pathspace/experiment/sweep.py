@@ -34,6 +34,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from ..metrics import METRICS
+from ..validate import compare_estimates
 from .convergence import pandas, reference_image
 from .specs import EstimatorSpec
 
@@ -119,8 +120,6 @@ def _pooled(results: list, reference: np.ndarray, reference_variance: np.ndarray
     estimator's passes are independent (its renders' variances are their errors); None: the renders with a
     NaN variance everywhere are Markov chains."""
     from scipy import stats
-
-    from ..validate import compare_estimates
 
     if independent is None:
         independent = not all(np.isnan(r.variance).all() for r in results)
