@@ -155,6 +155,13 @@ class PinholeCamera:
         """cos theta between unit directions (3, N) leaving the lens and the optical axis, float64."""
         return dot(self.forward[:, None], directions.astype(np.float64))
 
+    def pixel_of(self, raster: np.ndarray) -> np.ndarray:
+        """Flat pixel indices (N,) of raster positions (2, N), clamped to the film (NaN rows give 0; callers mask
+        them)."""
+        x = np.clip(np.nan_to_num(raster[0]), 0, self.width - 1).astype(np.int64)
+        y = np.clip(np.nan_to_num(raster[1]), 0, self.height - 1).astype(np.int64)
+        return y * self.width + x
+
     def raster(self, points: np.ndarray, lens_points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Raster coordinates (2, N) float64 of world points seen through lens points, and whether they are on the film.
 

@@ -226,7 +226,7 @@ class Bidirectional(Estimator):
             batch.nonfinite += int(finite.size - np.count_nonzero(finite))
             weights = np.where(finite, weights, 0.0)
         splat = np.isfinite(part.raster[0])
-        pixel = np.where(splat, _pixel_of(part.raster, batch.scene.camera), pixels.take(part.lane))
+        pixel = np.where(splat, batch.scene.camera.pixel_of(part.raster), pixels.take(part.lane))
         return weights, part.value * weights[None, :], pixel, splat
 
     def _record_strategies(self, layers: dict, part: Contributions, weighted: np.ndarray, film_pixel, mode,
@@ -241,10 +241,3 @@ class Bidirectional(Estimator):
                 film = mode.to_film(np.take(value, pick, axis=1), state, lanes)
                 layers.setdefault(f"s{s}t{t}.{kind}", []).append(Splats(lane_pass.take(lanes), film_pixel.take(pick),
                                                                         film))
-
-
-def _pixel_of(raster: np.ndarray, camera) -> np.ndarray:
-    """Pixel index of raster positions (NaN rows give 0; callers mask them)."""
-    x = np.clip(np.nan_to_num(raster[0]), 0, camera.width - 1).astype(np.int64)
-    y = np.clip(np.nan_to_num(raster[1]), 0, camera.height - 1).astype(np.int64)
-    return y * camera.width + x

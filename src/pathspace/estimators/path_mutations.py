@@ -168,7 +168,7 @@ def _regenerate(space: Space, y: Paths, lanes: np.ndarray, light_end: np.ndarray
             for name, value in vertex.items():
                 start[name][..., fresh] = value
         if at_light.size:
-            direction[:, at_light] = emission_direction(scene, _part(start, at_light), u[:3, at_light])
+            direction[:, at_light] = emission_direction(scene, _part(start, at_light), u[:2, at_light])
         if surface.size:
             rows = lanes.take(go.take(surface))
             arriving = unit(y.p[:, rows, end[surface]] - y.p[:, rows, end[surface] - 1])

@@ -16,7 +16,6 @@ from typing import Callable
 
 import numpy as np
 
-from .. import warp
 from ..bsdfs import MaterialLanes, Surface
 from ..spectra import RGBColours
 from ..vecmath import RAY_TMIN, dot, offset_origin
@@ -55,11 +54,9 @@ def bsdf_direction(scene, vertex: dict, arriving: np.ndarray, mode: str, u: np.n
 
 
 def emission_direction(scene, vertex: dict, u: np.ndarray) -> np.ndarray:
-    """Directions (3, n) float32 leaving light points ``vertex`` with the emission's density (cosine-weighted
-    about the normal, on a side chosen by ``u[0]`` for two-sided lights); ``u`` (3, n)."""
-    two = scene.lights.area.two_sided.take(vertex["entity"])
-    side = np.where(two & (u[0] < 0.5), np.float32(-1), np.float32(1))
-    return warp.square_to_cosine_about(vertex["n"] * side, u[1:3]).astype(np.float32)
+    """Directions (3, n) float32 leaving light points ``vertex`` with the emission's density (see
+    :meth:`pathspace.lights.area.AreaTables.emitted_directions`); ``u`` (2, n)."""
+    return scene.lights.area.emitted_directions(vertex["entity"], vertex["n"], u).astype(np.float32)
 
 
 def camera_direction(scene, raster: np.ndarray) -> np.ndarray:

@@ -270,6 +270,4 @@ def evaluate(space: Space, paths: Paths) -> PathValues:
         if terminated.any():
             space.mode.terminate_secondary(state, terminated)
         f = space.mode.to_film(f, state, lanes)
-    x = np.clip(np.nan_to_num(raster[0]), 0, camera.width - 1).astype(np.int64)
-    y = np.clip(np.nan_to_num(raster[1]), 0, camera.height - 1).astype(np.int64)
-    return PathValues(f, raster, y * camera.width + x, fwd, rev, delta, g_fwd, g_rev)
+    return PathValues(f, raster, camera.pixel_of(raster), fwd, rev, delta, g_fwd, g_rev)

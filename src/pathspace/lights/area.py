@@ -98,9 +98,7 @@ class AreaLight(Light):
         rows, p = tables.uniform_points(idx, u[0:2])
         n = rows[9:12]
         two = tables.two_sided.take(idx)
-        side = np.where(two & (u[2] < 0.5), np.float32(-1), np.float32(1))
-        u_side = np.where(two, (u[2] * 2) % 1.0, u[2])  # reused after choosing a side
-        d = warp.square_to_cosine_about(n * side, np.stack((u_side, u[3])))
+        d = tables.emitted_directions(idx, n, u[2:4])
         cos = np.abs(dot(n, d)).astype(np.float64)
         return EmissionSample(point=p, epsilon=rows[12], normal=n,
                               direction=d, value=tables.radiance_of(idx, colours),
@@ -153,6 +151,15 @@ class AreaTables:
     def light_count(self) -> int:
         """Number of emitting shapes."""
         return int(np.unique(self.light_of).size)
+
+    def emitted_directions(self, emitter: np.ndarray, normal: np.ndarray, u: np.ndarray) -> np.ndarray:
+        """Directions (3, N) leaving points with unit ``normal`` (3, N) on triangles ``emitter``, cosine-weighted
+        about the normal, on a side chosen by ``u[0]`` for two-sided lights (the density
+        :meth:`AreaLight.pdf_le` gives); ``u`` (2, N)."""
+        two = self.two_sided.take(emitter)
+        side = np.where(two & (u[0] < 0.5), np.float32(-1), np.float32(1))
+        u_side = np.where(two, (u[0] * 2) % 1.0, u[0])  # reused after choosing a side
+        return warp.square_to_cosine_about(normal * side, np.stack((u_side, u[1])))
 
     def uniform_points(self, emitter: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Points uniform in area on triangles ``emitter`` (density 1 / area): (their geometry rows, points)."""
