@@ -18,11 +18,12 @@ each pass renders them with BDPT (``max_depth = direct``, one sample per
 pixel), and the chains sample only longer paths.
 
 Normalisation and start (sec. 11.3.1).  Each path length L (``direct`` + 1
-.. ``max_depth``) is a class with ``bootstrap`` independent samples: paths
-made by a light walk of j vertices and a camera walk of L - j, j uniform,
-weighted by f / ((1 / (L + 1)) sum_j p_j) -- a one-sample MIS (balance)
-estimate of the energy b_L of paths of length L.  Chains are shared out in
-proportion to b_L and start at samples drawn in proportion to c(f) / p;
+.. ``max_depth``) is a class with ``bootstrap`` independent samples, each a
+pair of a light walk and a camera walk joined in all L + 1 ways, as BDPT
+does (:func:`~pathspace.estimators.path_mutations.fresh_paths`): the paths,
+weighted by f / sum_j p_j, estimate the energy b_L of paths of length L
+(multi-sample balance heuristic).  Chains are shared out in
+proportion to b_L and start at paths drawn in proportion to c(f) / sum_j p_j;
 each chain's splats are scaled by P b_L / (chains of its length), as in
 :mod:`pathspace.estimators.metropolis`, whose expected-value splatting and
 statistics it shares.  Chains change length freely.
@@ -150,8 +151,9 @@ class MLT(Estimator):
                                "chains (Veach's direct lighting); 0: the chains render every length",
                             partial(integer, low=0))
     chains: int = parameter(16384, "Markov chains advanced together (one wavefront)", partial(integer, low=1))
-    bootstrap: int = parameter(1 << 14, "independent paths per path length that estimate its brightness and the "
-                                        "chains' starting paths", partial(integer, low=1))
+    bootstrap: int = parameter(1 << 14, "independent samples per path length (pairs of a light and a camera "
+                                        "walk, joined in every way) that estimate its brightness and the chains' "
+                                        "starting paths", partial(integer, low=1))
     bidirectional: float = parameter(0.4, "weight of the bidirectional mutation (must be > 0: it alone reaches "
                                            "every path)", _mutation_weight)
     lens: float = parameter(0.25, "weight of the lens perturbation", _mutation_weight)
@@ -269,18 +271,18 @@ class MLT(Estimator):
         for label in range(classes if space.scene.lights.count else 0):
             length = first + label
             reservoir: dict = {"total": 0.0, "paths": None}
-            for start in range(0, self.bootstrap, BATCH):
+            batch = max(1, BATCH // (length + 1))      # pairs of walks; each makes length + 1 paths
+            for start in range(0, self.bootstrap, batch):
                 check()
-                count = min(BATCH, self.bootstrap - start)
-                paths, values, density = fresh_paths(space, np.full(count, length), length + 1, uniforms)
-                with np.errstate(divide="ignore", invalid="ignore"):
-                    weighted = np.where(density > 0, values.f / density, 0.0)
+                count = min(batch, self.bootstrap - start)
+                fresh = fresh_paths(space, np.full(count, length), length + 1, uniforms)
+                weighted = fresh.weights()
                 c = contribution(weighted)
                 finite = np.isfinite(weighted).all(axis=0) & np.isfinite(c)
                 counters.nonfinite_contributions += int(finite.size - np.count_nonzero(finite))
                 c = np.where(finite, c, 0.0)
-                sums[label] += np.bincount((start + np.arange(count)) % GROUPS, weights=c, minlength=GROUPS)
-                _keep(reservoir, c, paths, self.chains, uniforms)
+                sums[label] += np.bincount((start + fresh.pair) % GROUPS, weights=c, minlength=GROUPS)
+                _keep(reservoir, c, fresh.paths, self.chains, uniforms)
             picks.append(reservoir["paths"])
         per_group = self.bootstrap / GROUPS
         brightness = sums.sum(axis=1) / self.bootstrap

@@ -62,7 +62,7 @@ from .primary import SmallStep
 from .visibility import segment_blocked
 
 __all__ = ["ADD_SPREAD", "Lengths", "Proposed", "generation_density", "bidirectional", "lens", "lens_to", "caustic",
-           "caustic_toward", "multichain", "multichain_to", "fresh_paths"]
+           "caustic_toward", "multichain", "multichain_to", "fresh_paths", "FreshPaths"]
 
 ADD_SPREAD = 2   # k_a differs from k_d by at most this
 WAVELENGTH_STEP = SmallStep("exponential", 1.0 / 64.0)   # how bidirectional mutations move the wavelengths
@@ -175,8 +175,8 @@ def _regenerate(space: Space, y: Paths, lanes: np.ndarray, light_end: np.ndarray
             direction[:, surface] = bsdf_direction(scene, _part(start, surface), arriving, "importance",
                                                    u[:3, surface], colours.take(go.take(surface)))
         steps = light_steps.take(go) - (end < 0)
-        made, walked = walk(scene, start, direction, steps, "importance", uniforms, colours.take(go))
-        ok[go[~walked]] = False
+        made, reached = walk(scene, start, direction, steps, "importance", uniforms, colours.take(go))
+        ok[go[reached < steps]] = False
         first = np.maximum(end, -1) + 1 + (end < 0)
         row, col = np.nonzero(np.arange(made.slots)[None, :] < steps[:, None])
         y.put(lanes.take(go.take(row)), first.take(row) + col, made.vertex(row, col))
@@ -196,8 +196,8 @@ def _regenerate(space: Space, y: Paths, lanes: np.ndarray, light_end: np.ndarray
             arriving = unit(y.p[:, after, here] - y.p[:, after, here + 1])
             direction[:, surface] = bsdf_direction(scene, _part(start, surface), arriving, "radiance", u[:, surface],
                                                    colours.take(go.take(surface)))
-        made, walked = walk(scene, start, direction, camera_steps.take(go), "radiance", uniforms, colours.take(go))
-        ok[go[~walked]] = False
+        made, reached = walk(scene, start, direction, camera_steps.take(go), "radiance", uniforms, colours.take(go))
+        ok[go[reached < camera_steps.take(go)]] = False
         row, col = np.nonzero(np.arange(made.slots)[None, :] < camera_steps.take(go)[:, None])
         y.put(rows.take(row), end.take(row) - 1 - col, made.vertex(row, col))
     # The join.
@@ -225,26 +225,72 @@ def _part(vertex: dict, idx: np.ndarray) -> dict:
     return {name: np.take(value, idx, axis=-1) for name, value in vertex.items()}
 
 
-def fresh_paths(space: Space, length: np.ndarray, slots: int, uniforms: Uniforms) -> tuple[Paths, PathValues, np.ndarray]:
-    """Independent paths of ``length`` segments, each made by a light walk of j vertices and a camera walk of the
-    rest, j uniform: (paths, their values, their density (1 / (L + 1)) sum_j p_j; 0 where none was made)."""
+@dataclass
+class FreshPaths:
+    """Independent paths from pairs of walks (:func:`fresh_paths`): the paths, their values, ``density`` sum_j p_j
+    (0 where a path was not made) and ``pair``, the walk pair each path came from."""
+
+    paths: Paths
+    values: PathValues
+    density: np.ndarray
+    pair: np.ndarray
+
+    def weights(self) -> np.ndarray:
+        """f / sum_j p_j (channels, n), 0 where a path was not made: summed over the paths of a pair, an unbiased
+        estimate of the energy of the paths of its length."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return np.where(self.density > 0, self.values.f / self.density, 0.0)
+
+
+def fresh_paths(space: Space, length: np.ndarray, slots: int, uniforms: Uniforms) -> FreshPaths:
+    """Independent paths of ``length`` (pairs,) segments, BDPT's way for one length (Veach 1997, sec. 10.2):
+    for each pair of a light walk (a light point and L - 1 vertices) and a camera walk (L vertices from the
+    pinhole through a uniform film position), the L + 1 paths made of the first j light-walk vertices and the
+    first L - j camera-walk vertices, joined by a shadow ray (j = 0: the camera walk found a light).  Each
+    path's ``density`` sums its densities over the L + 1 splits (:func:`generation_density`), so f / density
+    is the multi-sample balance-heuristic weight (Veach 1997, sec. 9.2) and summed over a pair's paths
+    estimates the energy b_L of paths of length L -- with L + 1 times less variance than one split chosen at
+    random for paths only one split makes (a caustic seen through glass: only j = 0)."""
+    scene, camera = space.scene, space.scene.camera
     count = length.size
-    lanes = np.arange(count)
-    y = Paths.empty(count, slots)
-    y.k[:] = length
-    if space.spectral:
-        y.wavelength_number = uniforms(count)
-    camera = space.scene.camera
-    y.put(lanes, length, dict(p=np.repeat(camera.position.astype(np.float32)[:, None], count, axis=1),
-                              n=np.repeat(camera.forward.astype(np.float32)[:, None], count, axis=1),
-                              eps=np.zeros(count, np.float32), material=np.full(count, -1, np.int64),
-                              entity=np.full(count, -1, np.int64)))
-    light = np.minimum((uniforms(count) * (length + 1)).astype(np.int64), length)
-    ok = _regenerate(space, y, lanes, np.full(count, -1), light, length, length - light, uniforms)
-    y.k[~ok] = 0
+    numbers = uniforms(count) if space.spectral else np.zeros(count)
+    _, colours = space.colours(numbers)
+    light_vertex, direction = light_points(scene, uniforms(5 * count).reshape(5, count))
+    light_walk, light_reached = walk(scene, light_vertex, direction, length - 1, "importance", uniforms, colours)
+    light_reached += 1                                      # the light point
+    eye = dict(p=np.repeat(camera.position.astype(np.float32)[:, None], count, axis=1),
+               n=np.repeat(camera.forward.astype(np.float32)[:, None], count, axis=1),
+               eps=np.zeros(count, np.float32), material=np.full(count, -1, np.int64),
+               entity=np.full(count, -1, np.int64))
+    u = uniforms(2 * count).reshape(2, count)
+    film = np.stack((u[0] * camera.width, u[1] * camera.height))
+    camera_walk, camera_reached = walk(scene, eye, camera_direction(scene, film), length, "radiance", uniforms,
+                                       colours)
+    # Path c comes from pair[c] with split j[c]: slots 0 .. j-1 from the light walk, j .. L-1 from the camera walk.
+    pair = np.repeat(np.arange(count), length + 1)
+    j = np.arange(pair.size) - np.repeat(np.cumsum(length + 1) - (length + 1), length + 1)
+    k = length.take(pair)
+    made = (light_reached.take(pair) >= j) & (camera_reached.take(pair) >= k - j)
+    y = Paths.empty(pair.size, slots)
+    y.k = np.where(made, k, 0)
+    y.wavelength_number = numbers.take(pair)
+    lanes = np.arange(pair.size)
+    y.put(lanes, k, _part(eye, pair))
+    slot = np.arange(slots)[None, :]
+    row, col = np.nonzero(made[:, None] & (slot < j[:, None]) & (slot == 0))
+    y.put(row, col, _part(light_vertex, pair.take(row)))
+    row, col = np.nonzero(made[:, None] & (slot < j[:, None]) & (slot >= 1))
+    y.put(row, col, light_walk.vertex(pair.take(row), col - 1))
+    row, col = np.nonzero(made[:, None] & (slot >= j[:, None]) & (slot < k[:, None]))
+    y.put(row, col, camera_walk.vertex(pair.take(row), k.take(row) - 1 - col))
+    join = np.flatnonzero(made & (j >= 1))
+    if join.size:
+        seen = _visible(scene, y.vertex(join, j.take(join) - 1), y.vertex(join, j.take(join)))
+        made[join[~seen]] = False
+    y.k[~made] = 0
     values = evaluate(space, y)
-    density = np.where(ok, generation_density(values, np.zeros(count, np.int64), length), 0.0)
-    return y, values, density
+    density = np.where(made, generation_density(values, np.zeros(pair.size, np.int64), k) * (k + 1), 0.0)
+    return FreshPaths(y, values, density, pair)
 
 
 def bidirectional(space: Space, lengths: Lengths, x: Paths, xv: PathValues, uniforms: Uniforms) -> Proposed:
@@ -361,11 +407,11 @@ def _camera_chain(space: Space, x: Paths, j: np.ndarray, usable: np.ndarray, ras
         steps = (k - j).take(go)
         chain = k.take(go)[:, None] - 1 - np.arange(int(steps.max()))[None, :]      # the slots the walk makes
         lobes = _lobes(x, go, np.where(chain > j.take(go)[:, None], chain, -1))
-        made, walked = walk(scene, x.vertex(go, k.take(go)), camera_direction(scene, raster[:, go]), steps,
+        made, reached = walk(scene, x.vertex(go, k.take(go)), camera_direction(scene, raster[:, go]), steps,
                             "radiance", uniforms, colours.take(go), lobes)
         row, col = np.nonzero(np.arange(made.slots)[None, :] < steps[:, None])
         y.put(go.take(row), k.take(go).take(row) - 1 - col, made.vertex(row, col))
-        ok[go] = walked
+        ok[go] = reached == steps
     return y, ok
 
 
@@ -419,11 +465,11 @@ def multichain_to(space: Space, x: Paths, xv: PathValues, raster: np.ndarray, di
         jg, steps = j.take(go), (j - i).take(go)
         chain = jg[:, None] - 1 - np.arange(int(steps.max()))[None, :]
         lobes = _lobes(x, go, np.where(chain > i.take(go)[:, None], chain, -1))
-        made, walked = walk(space.scene, y.vertex(go, jg), direction[:, go].astype(np.float32), steps, "importance",
+        made, reached = walk(space.scene, y.vertex(go, jg), direction[:, go].astype(np.float32), steps, "importance",
                             uniforms, space.colours(x.wavelength_number.take(go))[1], lobes)
         row, col = np.nonzero(np.arange(made.slots)[None, :] < steps[:, None])
         y.put(go.take(row), jg.take(row) - 1 - col, made.vertex(row, col))
-        ok[go] = walked
+        ok[go] = reached == steps
     yv = evaluate(space, y)
     ok &= (_same_specular_chain(x, y, lanes, j + 1, k, yv.delta) & _same_specular_chain(x, y, lanes, i + 1, j, yv.delta)
            & ~yv.delta[lanes, j] & ~yv.delta[lanes, i])
@@ -474,11 +520,11 @@ def caustic_toward(space: Space, x: Paths, xv: PathValues, direction: np.ndarray
         steps = (k - 1 - j).take(go)
         chain = jg[:, None] + 1 + np.arange(int(steps.max()))[None, :]
         lobes = _lobes(x, go, np.where(chain < last.take(go)[:, None], chain, -1))
-        made, walked = walk(space.scene, x.vertex(go, jg), direction[:, go].astype(np.float32), steps, "importance",
+        made, reached = walk(space.scene, x.vertex(go, jg), direction[:, go].astype(np.float32), steps, "importance",
                             uniforms, space.colours(x.wavelength_number.take(go))[1], lobes)
         row, col = np.nonzero(np.arange(made.slots)[None, :] < steps[:, None])
         y.put(go.take(row), jg.take(row) + 1 + col, made.vertex(row, col))
-        ok[go] = walked
+        ok[go] = reached == steps
     yv = evaluate(space, y)
     ok &= _same_specular_chain(x, y, lanes, j + 1, last, yv.delta) & ~yv.delta[lanes, last]
     seen = np.flatnonzero(ok)

@@ -81,15 +81,17 @@ def walk(scene, start: dict, direction: np.ndarray, steps: np.ndarray, mode: str
          lobes: np.ndarray | None = None) -> tuple[Paths, np.ndarray]:
     """Walks of ``steps`` (n,) vertices from vertices ``start`` along ``direction`` (3, n), sampling the BSDF (with
     the lanes' ``colours``) at every vertex but the last: (the vertices reached, as slots 0 .. steps-1 of a
-    :class:`Paths` whose ``k`` is unused; whether each walk made all its vertices).  ``lobes`` (n, steps.max()): the first BSDF number of
-    the scattering at each vertex of the walk (perturbations), else drawn."""
+    :class:`Paths` whose ``k`` is unused; how many vertices each walk made before it stopped or escaped, (n,)).
+    ``lobes`` (n, steps.max()): the first BSDF number of the scattering at each vertex of the walk
+    (perturbations), else drawn."""
     count = steps.size
     span = int(steps.max(initial=0))
     out = Paths.empty(count, max(span, 1))
-    ok = (dot(direction.astype(np.float64), direction.astype(np.float64)) > 0) | (steps == 0)
+    reached = np.zeros(count, np.int64)
+    moving = dot(direction.astype(np.float64), direction.astype(np.float64)) > 0
     origin = offset_origin(start["p"], start["n"], start["eps"], direction)
     direction = direction.copy()
-    active = np.flatnonzero((steps > 0) & ok)
+    active = np.flatnonzero((steps > 0) & moving)
     mesh, emitter = scene.mesh, scene.lights.area.emitter_of_triangle
     for step in range(span):
         if not active.size:
@@ -97,11 +99,11 @@ def walk(scene, start: dict, direction: np.ndarray, steps: np.ndarray, mode: str
         hits = scene.accel.intersect(np.take(origin, active, axis=1), np.take(direction, active, axis=1), RAY_TMIN,
                                      normals=False, threads=1)
         hit = hits.prim >= 0
-        ok[active[~hit]] = False
         active, prim = active[hit], hits.prim[hit]
         p, n, eps = mesh.hit_geometry(prim, hits.u[hit], hits.v[hit])
         vertex = dict(p=p, n=n, eps=eps, material=mesh.material.take(prim).astype(np.int64), entity=emitter.take(prim))
         out.put(active, np.full(active.size, step), vertex)
+        reached[active] += 1
         more = np.flatnonzero(steps.take(active) > step + 1)
         if not more.size:
             break
@@ -112,9 +114,8 @@ def walk(scene, start: dict, direction: np.ndarray, steps: np.ndarray, mode: str
             u[0] = lobes[active, step]
         wi = bsdf_direction(scene, here, np.take(direction, active, axis=1), mode, u, colours.take(active))
         moving = dot(wi, wi) > 0
-        ok[active[~moving]] = False
         active, wi = active[moving], wi[:, moving]
         here = {name: np.compress(moving, value, axis=-1) for name, value in here.items()}
         direction[:, active] = wi
         origin[:, active] = offset_origin(here["p"], here["n"], here["eps"], wi)
-    return out, ok
+    return out, reached
