@@ -27,8 +27,8 @@ from pathspace.metrics import RELMSE_EPSILON, relmse
 ROOT = Path(__file__).resolve().parent.parent
 ESTIMATORS = {"pt": ("pt", {}), "bdpt": ("bdpt", {}), "pssmlt-pt": ("pssmlt", {}),
               "pssmlt-bdpt": ("pssmlt", {"over": "bdpt"}), "mmlt": ("mmlt", {}), "mlt": ("mlt", {}),
-              # Path-space MLT with paths of up to 4 segments (the directly seen caustic) left to BDPT.
-              "mlt-direct-4": ("mlt", {"direct": 4})}
+              # Path-space MLT with Veach's direct lighting (paths of 1 and 2 segments by BDPT; the default is 4).
+              "mlt-direct-2": ("mlt", {"direct": 2})}
 
 
 def rel_mse(result, reference) -> float:

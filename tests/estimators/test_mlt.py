@@ -19,6 +19,7 @@ from pathspace.estimators.path_mutations import (Lengths, bidirectional, caustic
                                                  lens_to, multichain, multichain_to)
 from pathspace.estimators.path_walks import unit
 from pathspace.vecmath import orthonormal_basis
+from pathspace.estimators.mlt import MLT
 from pathspace.estimators.paths import Space, evaluate
 
 from .test_metropolis import (ALPHA, MAX_DEPTH, check_blocks, check_brightness, luminance, luminance_and_error,
@@ -31,10 +32,13 @@ MIXTURES = [("bidirectional", ALONE),
             ("multichain", {**ALONE, "bidirectional": 0.5, "multichain": 0.5}),
             ("mixture", {})]
 Y = np.array([0.2126, 0.7152, 0.0722])
+# Veach's direct lighting (paths of at most 2 segments by BDPT) rather than the default 4: the chains then carry
+# paths of 3 .. MAX_DEPTH segments, so that the renders test the mutations on short paths too.
+DIRECT = 2
 
 
 def mlt_renders(name: str, params: dict, count: int, spp: int = 32, first_seed: int = 10) -> list:
-    return [ps.render(scene(name), "mlt", spp=spp, seed=first_seed + k, max_depth=MAX_DEPTH, chains=4096,
+    return [ps.render(scene(name), "mlt", spp=spp, seed=first_seed + k, max_depth=MAX_DEPTH, chains=4096, direct=DIRECT,
                       **params) for k in range(count)]
 
 
@@ -107,7 +111,8 @@ def test_mlt_agrees_with_bdpt_slow(name, label, params):
 
 
 def test_stats_and_acceptance_per_mutation():
-    r = ps.render(scene("cornell-box-specular"), "mlt", spp=4, seed=1, max_depth=6, chains=1024, bootstrap=4096)
+    r = ps.render(scene("cornell-box-specular"), "mlt", spp=4, seed=1, max_depth=6, chains=1024, bootstrap=4096,
+                  direct=DIRECT)
     m = r.stats["metropolis"]
     assert set(m["acceptance"]) == {"bidirectional", "lens", "caustic", "multichain"}
     assert all(0.0 < m["acceptance"][kind] < 1.0 for kind in ("bidirectional", "lens", "caustic"))
@@ -122,6 +127,11 @@ def test_stats_and_acceptance_per_mutation():
 def test_bad_parameters_name_the_field(params, field):
     with pytest.raises(ValueError, match=field):
         ps.render(scene("cornell-box"), "mlt", spp=1, **{"max_depth": 8, **params})
+
+
+def test_direct_defaults_to_four_segments_or_fewer_than_max_depth():
+    assert MLT().direct == 4 and MLT(max_depth=3).direct == 2 and MLT(max_depth=3, direct=0).direct == 0
+    assert "paths of at most 4 segments by BDPT" in " ".join(MLT(max_depth=10).plan(scene("cornell-box")))
 
 
 def test_unsupported_scenes_are_refused():
@@ -319,7 +329,7 @@ def test_spectral_mlt_agrees_with_spectral_bdpt():
     """The wavelengths are part of a path's state: a spectral render's luminance (Y of its XYZ film) agrees
     with spectral BDPT's, on a box with measured spectra."""
     s = scene("cornell-box-measured")
-    results = [ps.render(s, "mlt", spp=16, seed=20 + k, spectral=True, max_depth=MAX_DEPTH, chains=2048,
+    results = [ps.render(s, "mlt", spp=16, seed=20 + k, spectral=True, max_depth=MAX_DEPTH, chains=2048, direct=DIRECT,
                          bootstrap=1 << 13) for k in range(4)]
     assert all(r.stats["mode"] == "spectral" for r in results)
     ref = ps.render(s, "bdpt", spp=512, seed=1, spectral=True, max_depth=MAX_DEPTH)

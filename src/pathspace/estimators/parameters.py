@@ -51,49 +51,50 @@ def roulette_cap(default: float = 1.0):
                      partial(number, low=0.0, high=1.0, low_open=True, what="a survival cap in (0, 1]"))
 
 
-def _or_none(check):
+def or_none(check):
+    """``check`` that lets None ("use the default") through."""
     return lambda value, name: None if value is None else check(value, name)
 
 
 def light_rr():
     """The light subpaths' own roulette policy; None: ``rr``."""
-    return parameter(None, "roulette policy of light subpaths (default: rr)", _or_none(partial(choice, options=POLICIES)))
+    return parameter(None, "roulette policy of light subpaths (default: rr)", or_none(partial(choice, options=POLICIES)))
 
 
 def light_rr_depth():
     """The light subpaths' ``rr_depth``; None: ``rr_depth``."""
-    return parameter(None, "rr_depth of light subpaths (default: rr_depth)", _or_none(partial(integer, low=1)))
+    return parameter(None, "rr_depth of light subpaths (default: rr_depth)", or_none(partial(integer, low=1)))
 
 
 def light_rr_probability():
     """The light subpaths' ``rr_probability``; None: ``rr_probability``."""
     return parameter(None, "rr_probability of light subpaths (default: rr_probability)",
-                     _or_none(partial(number, low=0.0, high=1.0, high_open=True,
+                     or_none(partial(number, low=0.0, high=1.0, high_open=True,
                                       what="a termination probability in [0, 1)")))
 
 
 def light_rr_cap():
     """The light subpaths' ``rr_cap``; None: ``rr_cap``."""
     return parameter(None, "rr_cap of light subpaths (default: rr_cap)",
-                     _or_none(partial(number, low=0.0, high=1.0, low_open=True, what="a survival cap in (0, 1]")))
+                     or_none(partial(number, low=0.0, high=1.0, low_open=True, what="a survival cap in (0, 1]")))
 
 
 def underlying_rr():
     """A Metropolis estimator's roulette policy for the estimator it runs on; None: that estimator's default."""
     return parameter(None, "Russian roulette policy (default: the underlying estimator's)",
-                     _or_none(partial(choice, options=POLICIES)))
+                     or_none(partial(choice, options=POLICIES)))
 
 
 def underlying_rr_depth():
     """A Metropolis estimator's ``rr_depth`` for the estimator it runs on; None: that estimator's default."""
-    return parameter(None, "rr_depth (default: the underlying estimator's)", _or_none(partial(integer, low=1)))
+    return parameter(None, "rr_depth (default: the underlying estimator's)", or_none(partial(integer, low=1)))
 
 
 def mis_strategies():
     """The strategies BDPT's MIS combines (see :class:`pathspace.mis.StrategySubset`)."""
     return parameter(None, "the strategies MIS combines (default: all): a condition on s, t and k = s + t - 1 such "
                            "as 's != 0 and t != 0', or a list of [s, t] pairs; the others get weight 0",
-                     _or_none(lambda value, name: StrategySubset(value)))
+                     or_none(lambda value, name: StrategySubset(value)))
 
 
 def mis_heuristic(default: str, options: tuple[str, ...] = HEURISTICS):
