@@ -2,7 +2,8 @@
 
 The pieces first: f(x) and the vertex densities of :mod:`pathspace.estimators.paths` make each path length's
 energy out of independent bidirectional samples (the bootstrap, whose generation density is the one the
-bidirectional mutation's T uses), equal to BDPT's energy of that length.  Then whole renders: block-wise
+bidirectional mutation's T uses), equal to BDPT's energy of that length; one bidirectional mutation keeps
+a weighted sample of the target distributed as the target.  Then whole renders: block-wise
 t-tests of independent renders (seeds) against BDPT for the bidirectional mutation alone and mixed with each
 perturbation -- a wrong transition density T would move energy between blocks -- and the mean luminance
 within 0.5% of BDPT's beyond three standard errors.
@@ -50,8 +51,9 @@ def check_mlt_agreement(results: list, ref: ps.RenderResult) -> None:
 
 @pytest.mark.parametrize("name", ["cornell-box", "cornell-box-specular"])
 def test_independent_paths_give_each_length_bdpt_energy(name):
-    """The bootstrap's estimate of each path length's energy (f over the balance-heuristic mixture of the
-    L + 1 ways of making the path) equals BDPT's energy of that length (max_depth L minus max_depth L - 1)."""
+    """The bootstrap's estimate of each path length's energy (f over the sum of the densities of the L + 1
+    ways of making the path, summed over the paths of each pair of walks) equals BDPT's energy of that length
+    (max_depth L minus max_depth L - 1)."""
     s = scene(name)
     rng = np.random.default_rng(5)
     previous = (0.0, 0.0)

@@ -24,8 +24,9 @@ shadow ray.  Since any j could have made y,
 with splits whose joining segment touches a specular vertex left out
 (:func:`generation_density`); T(y -> x) is the same for deleting y's new
 vertices and regenerating x's.  Deleting everything (l = -1, m = k) is an
-independent sample of a new path, and the bootstrap draws its samples that
-way (:func:`fresh_paths`).
+independent sample of a new path.  The bootstrap's independent samples
+(:func:`fresh_paths`) join one light and one camera walk in all L + 1 ways
+instead, as BDPT does, with the same densities summed over the splits.
 
 Perturbations (Veach 1997, sec. 11.4.3 and 11.4.4)
 ---------------------------------------------------
