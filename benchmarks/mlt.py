@@ -83,7 +83,7 @@ def main() -> None:
     parser.add_argument("--max-depth", type=int, default=10)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--estimators", default=",".join(ESTIMATORS))
-    parser.add_argument("--seeds", type=int, default=1, help="renders per budget and estimator (relMSE averaged)")
+    parser.add_argument("--seeds", type=int, default=2, help="renders per budget and estimator (relMSE averaged)")
     args = parser.parse_args()
     for name in args.scenes.split(","):
         scene = ps.load_scene(ROOT / "scenes" / name / "scene.toml")
