@@ -18,10 +18,10 @@ import pathspace as ps
 from conftest import scene_dict
 from pathspace.estimators.path_mutations import (Lengths, bidirectional, caustic, caustic_toward, fresh_paths, lens,
                                                  lens_to, multichain, multichain_to)
-from pathspace.estimators.path_walks import unit
-from pathspace.vecmath import orthonormal_basis
 from pathspace.estimators.mlt import MLT
+from pathspace.estimators.path_walks import unit
 from pathspace.estimators.paths import Space, evaluate
+from pathspace.vecmath import orthonormal_basis
 
 from .test_metropolis import (ALPHA, MAX_DEPTH, check_blocks, check_brightness, luminance, luminance_and_error,
                               reference, scene)
@@ -200,8 +200,10 @@ def stationarity_chi2(name: str, wrong=None) -> tuple[float, int]:
 def test_bidirectional_mutation_keeps_the_target_distribution(name):
     """Detailed balance of the bidirectional mutation, in the integrated form that matters: one accepted or
     rejected mutation of an importance sample of c(f) leaves it a sample of c(f), path length by path length
-    (the length is what p_d, p_a and the generation density's sum over splits decide).  T's ratio made
-    symmetric, or off by a factor (k_y + 1) / (k_x + 1), fails the same test."""
+    (the length is what p_d, p_a and the normalisation of T decide).  T's ratio made symmetric, or off by a
+    factor (k_y + 1) / (k_x + 1), fails the same test.  The sample's weights and T share
+    :func:`generation_density`, so an error in which splits it sums would largely cancel here: the per-length
+    energy test above checks that."""
     chi2, rank = stationarity_chi2(name)
     assert rank == 9
     critical = stats.chi2.isf(ALPHA, rank)

@@ -17,7 +17,7 @@ from .base import parameter
 
 __all__ = ["max_depth", "roulette_policy", "roulette_depth", "roulette_probability", "roulette_cap", "light_rr", "light_rr_depth", "light_rr_probability", "light_rr_cap",
            "mis_heuristic", "mis_beta", "mis_strategy", "mis_strategies", "diffuse_sampling", "light_selection",
-           "light_measure", "pyramid", "underlying_rr", "underlying_rr_depth"]
+           "light_measure", "pyramid", "underlying_rr", "underlying_rr_depth", "or_none"]
 
 
 def max_depth(default: int = -1):
@@ -70,7 +70,7 @@ def light_rr_probability():
     """The light subpaths' ``rr_probability``; None: ``rr_probability``."""
     return parameter(None, "rr_probability of light subpaths (default: rr_probability)",
                      or_none(partial(number, low=0.0, high=1.0, high_open=True,
-                                      what="a termination probability in [0, 1)")))
+                                     what="a termination probability in [0, 1)")))
 
 
 def light_rr_cap():

@@ -56,8 +56,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..vecmath import orthonormal_basis
-from .path_walks import (Uniforms, bsdf_direction, camera_direction, emission_direction, light_points, lobe_numbers,
-                         unit, walk)
+from .path_walks import (Uniforms, bsdf_direction, camera_direction, emission_direction, film_positions, light_points,
+                         lobe_numbers, unit, walk)
 from .paths import Paths, PathValues, Space, evaluate
 from .primary import SmallStep
 from .visibility import segment_blocked
@@ -188,9 +188,7 @@ def _regenerate(space: Space, y: Paths, lanes: np.ndarray, light_end: np.ndarray
         start = y.vertex(rows, end)
         u = uniforms(3 * go.size).reshape(3, go.size)
         at_camera = end == y.k.take(rows)
-        camera = scene.camera
-        film = np.stack((u[0] * camera.width, u[1] * camera.height))
-        direction = camera_direction(scene, film)
+        direction = camera_direction(scene, film_positions(scene.camera, u[:2]))
         surface = np.flatnonzero(~at_camera)
         if surface.size:
             here, after = end.take(surface), rows.take(surface)
@@ -228,7 +226,7 @@ def _part(vertex: dict, idx: np.ndarray) -> dict:
 
 @dataclass
 class FreshPaths:
-    """Independent paths from pairs of walks (:func:`fresh_paths`): the paths, their values, ``density`` sum_j p_j
+    """Paths from independent pairs of walks (:func:`fresh_paths`; the paths of a pair share vertices): the paths, their values, ``density`` sum_j p_j
     (0 where a path was not made) and ``pair``, the walk pair each path came from."""
 
     paths: Paths
@@ -244,7 +242,7 @@ class FreshPaths:
 
 
 def fresh_paths(space: Space, length: np.ndarray, slots: int, uniforms: Uniforms) -> FreshPaths:
-    """Independent paths of ``length`` (pairs,) segments, BDPT's way for one length (Veach 1997, sec. 10.2):
+    """Paths of ``length`` (pairs,) segments from independent pairs of walks, BDPT's way for one length (Veach 1997, sec. 10.2):
     for each pair of a light walk (a light point and L - 1 vertices) and a camera walk (L vertices from the
     pinhole through a uniform film position), the L + 1 paths made of the first j light-walk vertices and the
     first L - j camera-walk vertices, joined by a shadow ray (j = 0: the camera walk found a light).  Each
@@ -263,8 +261,7 @@ def fresh_paths(space: Space, length: np.ndarray, slots: int, uniforms: Uniforms
                n=np.repeat(camera.forward.astype(np.float32)[:, None], count, axis=1),
                eps=np.zeros(count, np.float32), material=np.full(count, -1, np.int64),
                entity=np.full(count, -1, np.int64))
-    u = uniforms(2 * count).reshape(2, count)
-    film = np.stack((u[0] * camera.width, u[1] * camera.height))
+    film = film_positions(camera, uniforms(2 * count).reshape(2, count))
     camera_walk, camera_reached = walk(scene, eye, camera_direction(scene, film), length, "radiance", uniforms,
                                        colours)
     # Path c comes from pair[c] with split j[c]: slots 0 .. j-1 from the light walk, j .. L-1 from the camera walk.
@@ -409,7 +406,7 @@ def _camera_chain(space: Space, x: Paths, j: np.ndarray, usable: np.ndarray, ras
         chain = k.take(go)[:, None] - 1 - np.arange(int(steps.max()))[None, :]      # the slots the walk makes
         lobes = _lobes(x, go, np.where(chain > j.take(go)[:, None], chain, -1))
         made, reached = walk(scene, x.vertex(go, k.take(go)), camera_direction(scene, raster[:, go]), steps,
-                            "radiance", uniforms, colours.take(go), lobes)
+                             "radiance", uniforms, colours.take(go), lobes)
         row, col = np.nonzero(np.arange(made.slots)[None, :] < steps[:, None])
         y.put(go.take(row), k.take(go).take(row) - 1 - col, made.vertex(row, col))
         ok[go] = reached == steps
@@ -467,7 +464,7 @@ def multichain_to(space: Space, x: Paths, xv: PathValues, raster: np.ndarray, di
         chain = jg[:, None] - 1 - np.arange(int(steps.max()))[None, :]
         lobes = _lobes(x, go, np.where(chain > i.take(go)[:, None], chain, -1))
         made, reached = walk(space.scene, y.vertex(go, jg), direction[:, go].astype(np.float32), steps, "importance",
-                            uniforms, space.colours(x.wavelength_number.take(go))[1], lobes)
+                             uniforms, space.colours(x.wavelength_number.take(go))[1], lobes)
         row, col = np.nonzero(np.arange(made.slots)[None, :] < steps[:, None])
         y.put(go.take(row), jg.take(row) - 1 - col, made.vertex(row, col))
         ok[go] = reached == steps
@@ -522,7 +519,7 @@ def caustic_toward(space: Space, x: Paths, xv: PathValues, direction: np.ndarray
         chain = jg[:, None] + 1 + np.arange(int(steps.max()))[None, :]
         lobes = _lobes(x, go, np.where(chain < last.take(go)[:, None], chain, -1))
         made, reached = walk(space.scene, x.vertex(go, jg), direction[:, go].astype(np.float32), steps, "importance",
-                            uniforms, space.colours(x.wavelength_number.take(go))[1], lobes)
+                             uniforms, space.colours(x.wavelength_number.take(go))[1], lobes)
         row, col = np.nonzero(np.arange(made.slots)[None, :] < steps[:, None])
         y.put(go.take(row), jg.take(row) + 1 + col, made.vertex(row, col))
         ok[go] = reached == steps

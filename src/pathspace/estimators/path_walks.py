@@ -21,8 +21,8 @@ from ..spectra import RGBColours
 from ..vecmath import RAY_TMIN, dot, offset_origin
 from .paths import OPTIONS, Paths
 
-__all__ = ["walk", "Uniforms", "bsdf_direction", "emission_direction", "camera_direction", "light_points",
-           "lobe_numbers", "unit"]
+__all__ = ["walk", "Uniforms", "bsdf_direction", "emission_direction", "camera_direction", "film_positions",
+           "light_points", "lobe_numbers", "unit"]
 
 Uniforms = Callable[[int], np.ndarray]
 # The first BSDF number that picks a specular material's reflection (0) or its transmission (the last lobe).
@@ -65,6 +65,11 @@ def camera_direction(scene, raster: np.ndarray) -> np.ndarray:
     x, y = np.floor(raster[0]), np.floor(raster[1])
     pixels = (y * camera.width + x).astype(np.int64)
     return camera.generate_rays(pixels, np.stack((raster[0] - x, raster[1] - y)))[1]
+
+
+def film_positions(camera, u: np.ndarray) -> np.ndarray:
+    """Film positions (2, n) in raster units, uniform over the film, from ``u`` (2, n)."""
+    return np.stack((u[0] * camera.width, u[1] * camera.height))
 
 
 def light_points(scene, u: np.ndarray) -> tuple[dict, np.ndarray]:
