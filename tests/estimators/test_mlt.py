@@ -202,7 +202,7 @@ def test_bidirectional_mutation_keeps_the_target_distribution(name):
     rejected mutation of an importance sample of c(f) leaves it a sample of c(f), path length by path length
     (the length is what p_d, p_a and the normalisation of T decide).  T's ratio made symmetric, or off by a
     factor (k_y + 1) / (k_x + 1), fails the same test.  The sample's weights and T share
-    :func:`generation_density`, so an error in which splits it sums would largely cancel here: the per-length
+    :func:`split_densities`, so an error in which splits it sums would largely cancel here: the per-length
     energy test above checks that."""
     chi2, rank = stationarity_chi2(name)
     assert rank == 9

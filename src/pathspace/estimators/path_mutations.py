@@ -22,7 +22,7 @@ shadow ray.  Since any j could have made y,
     T(x -> y) = p_d p_a (1 / k_a) sum_j prod_{i in light walk} fwd_i(y) prod_{i in camera walk} rev_i(y),
 
 with splits whose joining segment touches a specular vertex left out
-(:func:`generation_density`); T(y -> x) is the same for deleting y's new
+(:func:`split_densities`); T(y -> x) is the same for deleting y's new
 vertices and regenerating x's.  Deleting everything (l = -1, m = k) is an
 independent sample of a new path.  The bootstrap's independent samples
 (:func:`fresh_paths`) join one light and one camera walk in all L + 1 ways
@@ -62,7 +62,7 @@ from .paths import Paths, PathValues, Space, evaluate
 from .primary import SmallStep
 from .visibility import segment_blocked
 
-__all__ = ["ADD_SPREAD", "Lengths", "Proposed", "generation_density", "bidirectional", "lens", "lens_to", "caustic",
+__all__ = ["ADD_SPREAD", "Lengths", "Proposed", "split_densities", "bidirectional", "lens", "lens_to", "caustic",
            "caustic_toward", "multichain", "multichain_to", "fresh_paths", "FreshPaths"]
 
 ADD_SPREAD = 2   # k_a differs from k_d by at most this
@@ -126,10 +126,10 @@ class Lengths:
         return self.add[np.minimum(kd, self.add.shape[0] - 1), np.minimum(ka, self.add.shape[1] - 1)]
 
 
-def generation_density(values: PathValues, first: np.ndarray, count: np.ndarray) -> np.ndarray:
-    """(1 / (count + 1)) sum_j p_j: the density of making vertices ``first`` .. ``first + count - 1`` of each path
-    by j steps of a walk from vertex ``first - 1`` and ``count - j`` steps of a walk from vertex ``first + count``,
-    joined between them; splits whose join touches a specular vertex have density 0."""
+def split_densities(values: PathValues, first: np.ndarray, count: np.ndarray) -> np.ndarray:
+    """sum_j p_j over the count + 1 splits j of vertices ``first`` .. ``first + count - 1`` of each path, p_j the
+    density of making them by j steps of a walk from vertex ``first - 1`` and ``count - j`` steps of a walk from
+    vertex ``first + count``, joined between them; splits whose join touches a specular vertex have density 0."""
     size, slots = values.fwd.shape
     lanes = np.arange(size)
     slot = np.arange(slots)[None, :]
@@ -144,7 +144,7 @@ def generation_density(values: PathValues, first: np.ndarray, count: np.ndarray)
         joinable = (last < 0) | ~(values.delta[lanes, np.clip(last, 0, slots - 1)]
                                   | values.delta[lanes, np.clip(last + 1, 0, slots - 1)])
         total += np.where((j <= count) & joinable, light * camera, 0.0)
-    return total / (count + 1)
+    return total
 
 
 def _regenerate(space: Space, y: Paths, lanes: np.ndarray, light_end: np.ndarray, light_steps: np.ndarray,
@@ -246,7 +246,7 @@ def fresh_paths(space: Space, length: np.ndarray, slots: int, uniforms: Uniforms
     for each pair of a light walk (a light point and L - 1 vertices) and a camera walk (L vertices from the
     pinhole through a uniform film position), the L + 1 paths made of the first j light-walk vertices and the
     first L - j camera-walk vertices, joined by a shadow ray (j = 0: the camera walk found a light).  Each
-    path's ``density`` sums its densities over the L + 1 splits (:func:`generation_density`), so f / density
+    path's ``density`` sums its densities over the L + 1 splits (:func:`split_densities`), so f / density
     is the multi-sample balance-heuristic weight (Veach 1997, sec. 9.2) and summed over a pair's paths
     estimates the energy b_L of paths of length L -- with L + 1 times less variance than one split chosen at
     random for paths only one split makes (a caustic seen through glass: only j = 0)."""
@@ -287,7 +287,7 @@ def fresh_paths(space: Space, length: np.ndarray, slots: int, uniforms: Uniforms
         made[join[~seen]] = False
     y.k[~made] = 0
     values = evaluate(space, y)
-    density = np.where(made, generation_density(values, np.zeros(pair.size, np.int64), k) * (k + 1), 0.0)
+    density = np.where(made, split_densities(values, np.zeros(pair.size, np.int64), k), 0.0)
     return FreshPaths(y, values, density, pair)
 
 
@@ -320,9 +320,10 @@ def bidirectional(space: Space, lengths: Lengths, x: Paths, xv: PathValues, unif
                          uniforms)
     y.k[~ok] = 0
     yv = evaluate(space, y)
-    forward = lengths.p_deletion(k, kd) * lengths.p_addition(kd, ka) * generation_density(yv, l + 1, new)
+    # The split j is uniform over the k_a ways of making k_a - 1 new vertices (k_d for x's, backward).
+    forward = lengths.p_deletion(k, kd) * lengths.p_addition(kd, ka) * split_densities(yv, l + 1, new) / ka
     backward = (lengths.p_deletion(np.where(ok, k_new, 1), np.where(ok, ka, 1)) * lengths.p_addition(ka, kd)
-                * generation_density(xv, l + 1, kd - 1))
+                * split_densities(xv, l + 1, kd - 1) / kd)
     with np.errstate(divide="ignore", invalid="ignore"):
         ratio = np.where(ok & (forward > 0), backward / forward, 0.0)
     return Proposed(y, yv, np.where(np.isfinite(ratio), ratio, 0.0))
