@@ -141,16 +141,19 @@ def test_render_arguments_are_checked(small):
 def test_timed_items_grow_while_short_and_shrink_when_long():
     from pathspace.estimators.passes import TIMED_ITEM_SECONDS, _TimedItemSize
 
-    size = _TimedItemSize(10.0, first=4, largest=64)  # target: TIMED_ITEM_SECONDS x 10 s per item
+    # A 64x64 image (4096 pixels): 1024 lanes are a quarter of it, 8192 two passes of all of it.
+    size = _TimedItemSize(10.0, 4096, first=1024, largest=8192)  # target: TIMED_ITEM_SECONDS x 10 s per item
     target = TIMED_ITEM_SECONDS * 10.0
-    assert size() == 4
-    for expected in (8, 16, 32, 64, 64):
-        size.observe(0.1 * target, size())
-        assert size() == expected
-    size.observe(0.1 * target, 3)  # a short item smaller than the current size says nothing
-    assert size() == 64
-    size.observe(3.0 * target, 64)
-    assert size() == 32
-    size.observe(1.0 * target, 32)  # on target: unchanged
-    assert size() == 32
-    assert _TimedItemSize(1.0, first=500, largest=64)() == 64
+    assert size.layout() == (1024, 1)
+    for expected in ((2048, 1), (4096, 1), (4096, 2), (4096, 2)):
+        tile, passes = size.layout()
+        size.observe(0.1 * target, tile * passes)
+        assert size.layout() == expected
+    size.observe(0.1 * target, 1000)  # a short item smaller than the current size says nothing
+    assert size.layout() == (4096, 2)
+    size.observe(3.0 * target, 8192)
+    assert size.layout() == (4096, 1)
+    size.observe(1.0 * target, 4096)  # on target: unchanged
+    assert size.layout() == (4096, 1)
+    assert _TimedItemSize(1.0, 4096, first=50_000, largest=8192).layout() == (4096, 2)
+    assert _TimedItemSize(1.0, 10_000, first=4096, largest=8192).layout() == (3334, 1)  # equal tiles

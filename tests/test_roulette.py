@@ -6,7 +6,8 @@ import pytest
 
 import pathspace as ps
 from pathspace.bsdfs import Dielectric, Diffuse, MaterialTable, Mirror, Phong
-from pathspace.roulette import POLICIES, SPECULAR_CONTINUATION, RussianRoulette
+from pathspace.roulette import POLICIES, SPECULAR_CONTINUATION, TRAPPED_DEPTH, RussianRoulette
+from conftest import scene_dict
 
 
 def test_survival_probabilities_of_each_policy():
@@ -20,6 +21,27 @@ def test_survival_probabilities_of_each_policy():
     np.testing.assert_array_equal(RussianRoulette("albedo", 2).survival(depth, None, albedo), [1.0, 0.5, 0.3, 1.0])
     np.testing.assert_array_equal(RussianRoulette("throughput", 1, cap=0.95).survival(depth, throughput, albedo),
                                   [0.2, 0.95, 0.7, 0.9])
+
+
+def test_throughput_survival_at_specular_vertices_is_at_most_their_albedo():
+    """A walk trapped in glass by total internal reflection keeps throughput 1; at specular vertices past
+    TRAPPED_DEPTH the survival is capped by their albedo (SPECULAR_CONTINUATION), elsewhere by rr_cap only."""
+    depth = np.array([TRAPPED_DEPTH, TRAPPED_DEPTH, TRAPPED_DEPTH, TRAPPED_DEPTH - 1, 6])
+    throughput = np.array([[1.0, 1.0, 0.5, 1.0, 0.7]] * 3)
+    albedo = np.array([SPECULAR_CONTINUATION, 0.886, SPECULAR_CONTINUATION, SPECULAR_CONTINUATION,
+                       SPECULAR_CONTINUATION])
+    specular = np.array([True, False, True, True, True])
+    roulette = RussianRoulette("throughput", 5)
+    np.testing.assert_array_equal(roulette.survival(depth, throughput, albedo, specular),
+                                  [SPECULAR_CONTINUATION, 1.0, 0.5, 1.0, 0.7])
+    np.testing.assert_array_equal(roulette.survival(depth, throughput, albedo), [1.0, 1.0, 0.5, 1.0, 0.7])
+
+
+def test_paths_trapped_in_glass_end():
+    """The tessellated glass sphere of the specular box traps some paths by total internal reflection;
+    with survival 1 they ran for thousands of segments (4957 here), each a wavefront step of a few lanes."""
+    result = ps.render(ps.scene_from_dict(scene_dict("cornell-box-specular", (64, 64))), "pt", spp=8, seed=1)
+    assert result.stats["longest_subpath"] < TRAPPED_DEPTH + 150  # 0.9^150: 1e-7 of the trapped walks
 
 
 def test_only_throughput_depends_on_the_walk():

@@ -21,15 +21,24 @@ the estimate stays unbiased for any q in (0, 1].  Policies (``rr``):
                   scaling of radiance by refraction (as Mitsuba 3 does): light
                   inside glass is not less important for being inside.  A
                   walk trapped in glass by total internal reflection keeps a
-                  throughput of 1 and goes on until it escapes (any survival
-                  below 1 there would give the escaping light weights that grow
-                  without bound: infinite variance where it escapes rarely).  A light
-                  subpath's throughput is measured relative to the ray leaving
-                  the light, so that the choice does not depend on the light's
-                  units.  Mitsuba 3 caps every vertex at 0.95, which gives
-                  infinite variance wherever the albedo exceeds the cap
-                  (throughput then grows by albedo / cap per bounce): in an
-                  albedo-0.99 furnace its finite-sample means fall ~10% short.
+                  throughput of 1 and would go on until it escapes --
+                  thousands of segments in the tessellated glass sphere of
+                  scenes/cornell-box-specular, each a wavefront step of a few
+                  lanes, which made path tracing there 10-20x slower to a
+                  given error (benchmarks/speed.py) -- so at specular vertices
+                  reached after ``TRAPPED_DEPTH`` (128) segments q is also at
+                  most their albedo as "albedo" sees it (at most 0.9).  Not
+                  earlier: the weight of light escaping from such a trap
+                  grows by 1/0.9 per trapped bounce, and where the traps hold
+                  much of the light (a glass sphere in a white furnace) a
+                  limit from depth 5 made the standard error 1.5-6x larger
+                  (from depth 64: up to 1.6x; from 128: unchanged).  A light subpath's throughput is measured relative
+                  to the ray leaving the light, so that the choice does not
+                  depend on the light's units.  Mitsuba 3 caps every vertex at
+                  0.95, which gives infinite variance wherever the albedo
+                  exceeds the cap (throughput then grows by albedo / cap per
+                  bounce): in an albedo-0.99 furnace its finite-sample means
+                  fall ~10% short.
 
 "off", "fixed" and "albedo" are *local*: past ``rr_depth``, q depends only on
 the vertex's material, the same whichever direction a walk passes the
@@ -53,11 +62,14 @@ import numpy as np
 
 from .checks import choice, integer, number
 
-__all__ = ["RussianRoulette", "POLICIES", "SPECULAR_CONTINUATION", "roulette_warnings"]
+__all__ = ["RussianRoulette", "POLICIES", "SPECULAR_CONTINUATION", "TRAPPED_DEPTH", "roulette_warnings"]
 
 POLICIES = ("off", "fixed", "albedo", "throughput")
 # The largest survival probability "albedo" gives lossless specular (delta) materials.
 SPECULAR_CONTINUATION = 0.9
+# "throughput" survival at specular vertices reached after this many segments is at most their albedo: walks
+# trapped in glass by total internal reflection end.  Earlier, variance grows (see the module docstring).
+TRAPPED_DEPTH = 128
 
 
 @dataclass(frozen=True)
@@ -100,17 +112,27 @@ class RussianRoulette:
             return np.clip(albedo, 0.0, 1.0)
         return np.ones(albedo.shape)
 
-    def survival(self, depth: np.ndarray, throughput: np.ndarray | None, albedo: np.ndarray) -> np.ndarray | None:
+    def survival(self, depth: np.ndarray, throughput: np.ndarray | None, albedo: np.ndarray,
+                 specular: np.ndarray | None = None) -> np.ndarray | None:
         """Survival probabilities (N,) at vertices reached after ``depth`` (N,) segments, or None (all survive).
 
         ``throughput`` (C, N) is the walk's throughput including this
         vertex's sample weight (read by "throughput" only; None otherwise
         allowed); ``albedo`` (N,) the albedo of each vertex's material
-        (see :attr:`pathspace.bsdfs.MaterialTable.albedo`).
+        (see :attr:`pathspace.bsdfs.MaterialTable.albedo`, at most
+        :data:`SPECULAR_CONTINUATION` for specular materials); ``specular``
+        (N,) bool: vertices of specular (delta) materials, where "throughput"
+        survives with at most their albedo from ``TRAPPED_DEPTH`` segments on
+        (None: none are).
         """
         if self.policy == "off" or depth.max(initial=0) < self.start_depth:
             return None
-        q = self.mis_survival(albedo) if self.local else np.clip(throughput.max(axis=0), 0.0, self.cap)
+        if self.local:
+            q = self.mis_survival(albedo)
+        else:
+            q = np.clip(throughput.max(axis=0), 0.0, self.cap)
+            if specular is not None:
+                q = np.where(specular & (depth >= TRAPPED_DEPTH), np.minimum(q, albedo), q)
         return np.where(depth >= self.start_depth, q, 1.0)
 
 

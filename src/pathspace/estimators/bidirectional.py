@@ -87,6 +87,7 @@ class Bidirectional(Estimator):
 
     uses_camera_subpaths = True
     uses_lens_hits = True
+    uses_densities = True  # connections weighted by MIS, which reads the vertex densities (light tracing: no)
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -203,7 +204,7 @@ class Bidirectional(Estimator):
         state = Lanes(mode.path_fields, **mode.start(samplers["wavelengths"].draw(mode.camera_dims)))
         colours = mode.colours(state)
         settings = SubpathSettings(scene, colours, {"diffuse_sampling": self.diffuse_sampling}, self.roulette,
-                                   self.light_roulette, self.depth_limit + 1, counters, control)
+                                   self.light_roulette, self.depth_limit + 1, counters, control, self.uses_densities)
         s, t = chosen if chosen is not None else (None, None)
         eye = (camera_subpaths(settings, pixels, samplers["camera"], None if t is None else np.maximum(t, 1))
                if self.uses_camera_subpaths else None)
@@ -215,7 +216,7 @@ class Bidirectional(Estimator):
         if terminated.any():
             mode.terminate_secondary(state, terminated)
         return Batch(scene, light, eye, hits if lens else None, colours, settings.options, self.depth_limit,
-                     units, chosen=chosen), state
+                     units, self.uses_densities, chosen=chosen), state
 
     def _weighted(self, part: Contributions, batch: Batch, pixels: np.ndarray):
         """(MIS weights (n,), weighted values (C, n), film pixel (n,), whether each is a splat (n,)) of ``part``'s

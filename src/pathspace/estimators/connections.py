@@ -54,6 +54,7 @@ class Batch:
     options: dict
     max_depth: int     # segments
     units: np.ndarray
+    densities: bool = True  # whether connections carry the densities MIS weights read (light tracing: no)
     rays: int = 0      # shadow rays traced
     nonfinite: int = 0  # contributions dropped because a channel or their weight was NaN or infinite
     chosen: tuple[np.ndarray, np.ndarray] | None = None   # (s, t) per lane: only that strategy (MMLT); None: all
@@ -189,7 +190,7 @@ def lens_samples(batch: Batch) -> Contributions | None:
     if not y.size:
         return None
     wi, we, pdf_lens, lens, raster, valid = camera.sample_importance(y.p, y.u)
-    value, pdf_fwd, pdf_back = _toward_lens(batch, y, on_light.take(y.v), wi)
+    value, pdf_fwd, pdf_back = _toward_lens(batch, y, on_light.take(y.v), wi, batch.densities)
     with np.errstate(divide="ignore", invalid="ignore"):
         value = np.where(valid & (pdf_lens > 0), y.beta * value * (we / pdf_lens), 0.0)
     useful = batch.useful(value)
@@ -202,6 +203,9 @@ def lens_samples(batch: Batch) -> Contributions | None:
     useful = useful[~blocked]
     if not useful.size:
         return None
+    if not batch.densities:
+        return Contributions.make(y.lane.take(useful), y.index.take(useful) + 1, 1, value[:, useful],
+                                  raster=raster[:, useful], flags=batch.lane_flags.take(y.lane.take(useful)))
     y, value, wi, lens = y.keep(useful), value[:, useful], wi[:, useful], lens[:, useful]
     pdf_fwd, pdf_back, we = pdf_fwd[useful], pdf_back[useful], we[useful]
     d = lens - y.p
@@ -219,9 +223,10 @@ def lens_samples(batch: Batch) -> Contributions | None:
                               pt_rev=pt_rev, flags=batch.lane_flags.take(y.lane))
 
 
-def _toward_lens(batch: Batch, y: Vertices, on_light: np.ndarray, wi: np.ndarray):
+def _toward_lens(batch: Batch, y: Vertices, on_light: np.ndarray, wi: np.ndarray, reverse: bool = True):
     """What light vertices ``y`` send toward the lens along ``wi`` (f |cos|, or emission |cos|), the density
-    of that direction at y, and the density at y of the direction to y_{s-2}, light arriving from the lens."""
+    of that direction at y, and the density at y of the direction to y_{s-2}, light arriving from the lens
+    (zero unless ``reverse``)."""
     value = np.zeros((batch.colours.channels, y.size))
     pdf_fwd, pdf_back = np.zeros(y.size), np.zeros(y.size)
     source, surface = np.flatnonzero(on_light), np.flatnonzero(~on_light)
@@ -234,7 +239,8 @@ def _toward_lens(batch: Batch, y: Vertices, on_light: np.ndarray, wi: np.ndarray
         ys = y.keep(surface)
         materials, w = batch.materials(ys), np.take(wi, surface, axis=1)
         value[:, surface], pdf_fwd[surface] = materials.eval(_surface(ys), w)
-        pdf_back[surface] = reverse_pdf(materials, ys.n, w, ys.wo)
+        if reverse:
+            pdf_back[surface] = reverse_pdf(materials, ys.n, w, ys.wo)
     return value, pdf_fwd, pdf_back
 
 

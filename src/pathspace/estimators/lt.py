@@ -30,6 +30,7 @@ class LightTracer(Bidirectional):
     name = "lt"
     uses_camera_subpaths = False
     uses_lens_hits = False
+    uses_densities = False  # every connection has weight 1
 
     def plan(self, scene) -> list[str]:
         """What this estimator will do on ``scene``, and what it leaves out and why."""

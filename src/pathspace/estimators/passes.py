@@ -2,8 +2,9 @@
 
 A render of ``spp`` samples per pixel is ``spp`` passes over the image.  Work
 items hold at most about ``tile_pixels`` lanes: a tile of a large image, or
-several passes of a small one (:func:`work_layout`); each (pass, tile) unit
-has its own random streams (see :mod:`pathspace.sampler`).  One worker thread
+several passes of a small one (:func:`work_layout`); under a time budget the
+items start small and follow their own durations (:class:`_TimedItemSize`).
+Each (pass, tile) unit has its own random streams (see :mod:`pathspace.sampler`).  One worker thread
 per core runs the estimator's ``render_items`` on its own wavefront, taking
 items as it needs them -- NumPy and Embree release the GIL in their inner
 loops -- and the main thread hands results to the film in item order, so the
@@ -24,34 +25,30 @@ from .control import Interrupted
 
 __all__ = ["render_passes", "work_layout"]
 
-# With a time budget, items hold at most 1 / TIMED_ITEM_SHARE of the lanes they would otherwise, and a
-# small image's passes are grouped into items that take a worker about TIMED_ITEM_SECONDS of the budget.
-TIMED_ITEM_SHARE = 4
+# With a time budget, items start at TIMED_FIRST_LANES lanes (fewer would spend their time in per-bounce
+# overhead) and grow or shrink so that one takes a worker about TIMED_ITEM_SECONDS of the budget.
 TIMED_ITEM_SECONDS = 0.1
-TIMED_FIRST_LANES = 4096  # the first items' lanes: fewer would spend their time in per-bounce overhead
+TIMED_FIRST_LANES = 4096
 
 
-def work_layout(pixel_count: int, passes: int | None, workers: int, tile_pixels: int) -> tuple[int, int]:
-    """(tile size in pixels, passes per work item) for an image of ``pixel_count`` pixels, in items of
-    about ``tile_pixels`` lanes.
+def _layout(pixel_count: int, lanes: int) -> tuple[int, int]:
+    """(tile size in pixels, passes per item) of items of about ``lanes`` lanes: tiles of equal size if the
+    image has more pixels than that, else the whole image, as many passes as fit."""
+    tiles = -(-pixel_count // lanes)
+    tile = -(-pixel_count // tiles)
+    return (tile, 1) if tiles > 1 else (tile, max(1, lanes // pixel_count))
+
+
+def work_layout(pixel_count: int, passes: int, workers: int, tile_pixels: int) -> tuple[int, int]:
+    """(tile size in pixels, passes per work item) of a render of ``passes`` passes over an image of
+    ``pixel_count`` pixels, in items of about ``tile_pixels`` lanes.
 
     Small images pack several passes into an item, but no more than keeps
-    every worker busy when the number of ``passes`` is known.  With a time
-    budget (``passes`` None) items hold a quarter as many lanes -- work in
-    flight at the deadline is dropped, and an item's last steps (connections,
-    splats) run between clock checks, so it is cut finer.  The grouping
-    changes neither the random streams nor the order in which samples reach
-    the film.
+    every worker busy.  The grouping changes neither the random streams nor
+    the order in which samples reach the film.
     """
-    if passes is None:
-        tile_pixels = max(1, tile_pixels // TIMED_ITEM_SHARE)
-    tiles = -(-pixel_count // tile_pixels)
-    tile = -(-pixel_count // tiles)
-    if tiles > 1:
-        return tile, 1
-    if passes is None:
-        return tile, max(1, tile_pixels // pixel_count)
-    return tile, min(max(1, tile_pixels // pixel_count), max(1, -(-passes // (2 * workers))))
+    tile, per_item = _layout(pixel_count, tile_pixels)
+    return tile, min(per_item, max(1, -(-passes // (2 * workers))))
 
 
 def _pass_groups(passes: Iterator[int], size: Callable[[], int], first: int, breaks: set[int]) -> Iterator[range]:
@@ -68,27 +65,32 @@ def _pass_groups(passes: Iterator[int], size: Callable[[], int], first: int, bre
 
 
 class _TimedItemSize:
-    """Passes per item under a time budget, from the items' own durations: starting from ``first``
-    passes (at most ``largest``), the size doubles while a worker's last item took under half of
-    TIMED_ITEM_SECONDS of the budget and halves while it took over twice that (a pass's cost is known
-    only once passes have run)."""
+    """Item layout under a time budget, from the items' own durations: starting from ``first`` lanes (at
+    most ``largest``), the lanes per item double while a worker's last item took under half of
+    TIMED_ITEM_SECONDS of the budget and halve while it took over twice that (a pass's cost is known
+    only once passes have run).  Work in flight at the deadline is dropped, so items stay a small part of
+    the budget; long budgets reach the lanes of a render in passes, and its throughput."""
 
-    def __init__(self, seconds: float, first: int, largest: int) -> None:
-        self.target, self.largest, self.size = TIMED_ITEM_SECONDS * seconds, largest, min(first, largest)
+    def __init__(self, seconds: float, pixel_count: int, first: int, largest: int) -> None:
+        self.target, self.pixel_count, self.largest = TIMED_ITEM_SECONDS * seconds, pixel_count, largest
+        self.lanes = min(first, largest)
 
-    def __call__(self) -> int:
-        return self.size
+    def layout(self) -> tuple[int, int]:
+        """(tile size in pixels, passes per item) of the next items."""
+        return _layout(self.pixel_count, self.lanes)
 
-    def observe(self, seconds: float, passes: int) -> None:
-        """A worker finished an item of ``passes`` passes in ``seconds``."""
-        if seconds < 0.5 * self.target and passes >= self.size:
-            self.size = min(self.largest, 2 * self.size)
+    def observe(self, seconds: float, lanes: int) -> None:
+        """A worker finished an item of ``lanes`` lanes in ``seconds``."""
+        tile, per_item = self.layout()
+        if seconds < 0.5 * self.target and lanes >= tile * per_item:
+            self.lanes = min(self.largest, 2 * self.lanes)
         elif seconds > 2.0 * self.target:
-            self.size = max(1, self.size // 2)
+            self.lanes = max(1, self.lanes // 2)
 
 
-def _work_items(job: RenderJob, budget: Budget, tile: int, size: Callable[[], int]) -> Iterator[WorkItem]:
-    """Work items in order: passes until the budget is spent, each group of ``size()`` passes tile by tile."""
+def _work_items(job: RenderJob, budget: Budget, layout: Callable[[], tuple[int, int]]) -> Iterator[WorkItem]:
+    """Work items in order: passes until the budget is spent, in groups and tiles as ``layout()`` (tile size,
+    passes per item) says when the group is formed."""
     control, pixel_count = job.control, job.film.pixel_count
 
     def passes() -> Iterator[int]:
@@ -100,7 +102,8 @@ def _work_items(job: RenderJob, budget: Budget, tile: int, size: Callable[[], in
 
     breaks = {int(c) for c in budget.checkpoints} if budget.checkpoint_unit == "spp" else set()
     index = 0
-    for group in _pass_groups(passes(), size, budget.first_pass, breaks):
+    for group in _pass_groups(passes(), lambda: layout()[1], budget.first_pass, breaks):
+        tile = layout()[0]
         for start in range(0, pixel_count, tile):
             yield WorkItem(index, group, start // tile, start, min(start + tile, pixel_count))
             index += 1
@@ -141,17 +144,19 @@ def render_passes(estimator, job: RenderJob, budget: Budget,
                   on_checkpoint: Callable[[Checkpoint], None] | None = None) -> None:
     """Render ``budget`` with ``estimator.render_items`` on ``job.threads`` workers into ``job.film``."""
     film, control = job.film, job.control
-    tile, per_item = work_layout(film.pixel_count, budget.spp, job.threads, estimator.tile_pixels)
     timed = None
     if budget.seconds is not None:
-        timed = _TimedItemSize(budget.seconds, -(-TIMED_FIRST_LANES // tile), per_item)
-    items = _work_items(job, budget, tile, timed or (lambda: per_item))
+        timed = _TimedItemSize(budget.seconds, film.pixel_count, TIMED_FIRST_LANES, estimator.tile_pixels)
+        items = _work_items(job, budget, timed.layout)
+    else:
+        layout = work_layout(film.pixel_count, budget.spp, job.threads, estimator.tile_pixels)
+        items = _work_items(job, budget, lambda: layout)
     lock, done = threading.Lock(), threading.Condition()
     results: dict[int, ItemResult] = {}
     failures: list[BaseException] = []
     counters = [Counters() for _ in range(job.threads)]
     running = [job.threads]
-    handed: dict[int, tuple[float, int]] = {}  # thread -> (clock, passes) of the item it took last
+    handed: dict[int, tuple[float, int]] = {}  # thread -> (clock, lanes) of the item it took last
 
     def next_item() -> WorkItem | None:
         control.check()
@@ -161,7 +166,7 @@ def render_passes(estimator, job: RenderJob, budget: Budget,
                 timed.observe(now - handed[thread][0], handed[thread][1])
             item = next(items, None)
             if item is not None:
-                handed[thread] = (now, len(item.passes))
+                handed[thread] = (now, len(item.passes) * (item.pixel_stop - item.pixel_start))
             return item
 
     def work(k: int) -> None:

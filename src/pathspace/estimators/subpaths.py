@@ -210,6 +210,7 @@ class SubpathSettings:
     max_vertices: int
     counters: Counters
     control: RenderControl
+    densities: bool = True  # whether to record the reverse densities (``rev``) that MIS weights read
 
 
 class _Recorder:
@@ -233,12 +234,20 @@ class _Recorder:
         return record
 
     def flatten(self, lanes: int, terminated: np.ndarray) -> Subpaths:
-        # Records hold vertices depth by depth; a stable sort by lane puts them lane by lane, in depth order.
-        lane = np.concatenate([record["lane"] for record in self.records])
-        order = np.argsort(lane, kind="stable")
-        offset = np.concatenate([[0], np.cumsum(np.bincount(lane, minlength=lanes))]).astype(np.int64)
-        fields = {name: np.concatenate([record[name] for record in self.records], axis=-1).take(order, axis=-1)
-                  for name in FIELDS}
+        # Records hold vertices depth by depth, and a lane has one vertex of every index below its length:
+        # vertex i of lane l goes to offset[l] + i, written there straight from its record.
+        length = np.zeros(lanes, np.int64)
+        for record in self.records:
+            length[record["lane"]] += 1
+        offset = np.concatenate([[0], np.cumsum(length)]).astype(np.int64)
+        places = [offset.take(record["lane"]) + record["index"] for record in self.records]
+        fields = {}
+        for name in FIELDS:
+            parts = [record[name] for record in self.records]
+            out = np.empty(parts[0].shape[:-1] + (int(offset[-1]),), np.result_type(*parts))
+            for place, part in zip(places, parts):
+                out[..., place] = part
+            fields[name] = out
         return Subpaths(offset=offset, terminated=terminated, **fields)
 
 
@@ -306,9 +315,11 @@ class _Growth:
             return False
         materials = MaterialLanes(table, arrival.material, settings.colours.take(lanes.lane), settings.options)
         sample = materials.sample(arrival.surface, u.bsdf, walk.transport)
-        # The previous vertex as the opposite walk would generate it from here (Veach 1997, eq. 10.7).
-        pdf_back = np.where(sample.delta, 0.0, reverse_pdf(materials, arrival.normal, sample.wi, -lanes.direction)) * q_rev
-        self.previous["rev"][np.searchsorted(self.previous["lane"], lanes.lane)] = pdf_back * g_prev
+        if settings.densities:
+            # The previous vertex as the opposite walk would generate it from here (Veach 1997, eq. 10.7).
+            pdf_back = np.where(sample.delta, 0.0,
+                                reverse_pdf(materials, arrival.normal, sample.wi, -lanes.direction)) * q_rev
+            self.previous["rev"][np.searchsorted(self.previous["lane"], lanes.lane)] = pdf_back * g_prev
         if sample.terminated is not None:
             self.terminated[lanes.lane[sample.terminated]] = True
         alive = walk.scatter(arrival, sample, u.roulette, walk.survival(arrival, sample), q)

@@ -164,7 +164,9 @@ class Walk:
             if self.transport == "radiance":   # undo the 1 / eta^2 of refractions (see pathspace.roulette)
                 scale = lanes.eta_scale if sample.eta is None else lanes.eta_scale * sample.eta * sample.eta
                 throughput = throughput * scale
-        return roulette.survival(lanes.depth, throughput, self.scene.materials.albedo.take(hit.material))
+        materials = self.scene.materials
+        specular = materials.delta.take(hit.material) if throughput is not None and materials.delta.any() else None
+        return roulette.survival(lanes.depth, throughput, materials.albedo.take(hit.material), specular)
 
     def mis_survival(self, hit: Arrival, roulette: RussianRoulette | None = None) -> np.ndarray:
         """q at ``hit`` as multiple importance sampling sees it (N,), under this walk's roulette or another

@@ -51,7 +51,6 @@ from dataclasses import dataclass, field
 from typing import Callable, Union
 
 import numpy as np
-from scipy import stats
 
 from .domains import PlaneDomain, SphereDomain, Support
 
@@ -484,6 +483,8 @@ def chi2_test(domain: Domain, sample: Callable, pdf: Callable[[np.ndarray], np.n
         reasons.append("too few populated cells for a test")
         return ChiSquareResult(False, np.inf, 0, 0.0, significance, pdf_integral, "; ".join(reasons), **report,
                                reasons=reasons)
+    from scipy import stats  # here, not at module level: scipy.stats takes most of a second to import
+
     p_value = float(stats.chi2.sf(statistic, dof))
     if p_value < significance:
         reasons.append("samples are not distributed according to the pdf")

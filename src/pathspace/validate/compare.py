@@ -24,7 +24,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import stats
 
 from .chi2 import sidak_significance
 
@@ -92,6 +91,8 @@ def compare_estimates(image_a: np.ndarray, variance_a: np.ndarray, image_b: np.n
     channels = z.shape[2]
     significance = sidak_significance(alpha, 1 + channels)
     local_level = sidak_significance(significance, z.size)
+    from scipy import stats  # here, not at module level: scipy.stats takes most of a second to import
+
     critical = float(stats.norm.isf(local_level / 2))
     abs_z = np.abs(z)
     worst = np.unravel_index(np.argmax(abs_z), z.shape)

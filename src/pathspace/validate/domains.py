@@ -35,7 +35,6 @@ from __future__ import annotations
 from typing import Callable
 
 import numpy as np
-from scipy import optimize
 
 from ..vecmath import orthonormal_basis
 
@@ -319,6 +318,8 @@ class _SphereQuadric:
             return np.zeros(0)
         count = 1024
         angle = np.linspace(0.0, TWO_PI, count, endpoint=False)
+        from scipy import optimize  # here, not at module level: keeps `import pathspace` light
+
         u = domain.to_uv(self.rim(angle))[0]
         step = TWO_PI / count
         before, after = np.roll(u, 1), np.roll(u, -1)
