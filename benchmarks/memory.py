@@ -1,7 +1,7 @@
 """Memory benchmark: peak resident memory of renders of the Cornell box, by estimator, resolution and spp.
 
 Each configuration runs in a fresh Python process (so peaks do not mix); the
-child reports its peak RSS (``ru_maxrss``), its RSS once the scene and its BVH
+child reports its peak RSS (``VmHWM``; ``ru_maxrss`` off Linux), its RSS once the scene and its BVH
 are ready (the baseline every render pays), the render time, and
 :func:`pathspace.memory.estimate_render_memory`'s estimate.  Peaks that grow with
 spp would mean something accumulates per pass; the peak above the baseline,
@@ -36,7 +36,10 @@ base = psutil.Process().memory_info().rss
 start = time.perf_counter()
 result = ps.render(scene, estimator, spp=spp, seed=0, threads=threads, **options)
 seconds = time.perf_counter() - start
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+try:  # VmHWM: this process image's own peak (ru_maxrss keeps the peak of the parent that forked it)
+    peak = next(int(line.split()[1]) * 1024 for line in open("/proc/self/status") if line.startswith("VmHWM:"))
+except OSError:
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
 estimate = estimate_render_memory(scene, ps.estimators.make_estimator(estimator, **options), result.film.covariance,
                                   threads)
 print(json.dumps({"peak": peak, "base": base, "seconds": seconds, "estimate": estimate}))

@@ -42,7 +42,7 @@ from pathspace.accel import Accel
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from bdpt import rel_mse  # noqa: E402  (benchmarks are scripts; one helper for relMSE minus the reference's own)
+from bdpt import reference_floor, rel_mse  # noqa: E402  (benchmarks are scripts; one helper for relMSE minus the reference's own)
 from memory import measure as measure_memory  # noqa: E402
 
 ROOT = HERE.parent
@@ -118,8 +118,7 @@ def time_to_target(scene_name: str, args) -> None:
                   f"relMSE {error:.3e} -> {seconds[estimator]:7.1f} s to {TARGET:g}")
         if mitsuba is not None:
             image, took = mitsuba.render(seed=100 + repeat)
-            error = ps.metrics.relmse(image, reference.image) - float(
-                np.mean(reference.variance / (reference.image ** 2 + ps.metrics.RELMSE_EPSILON)))
+            error = ps.metrics.relmse(image, reference.image) - reference_floor(reference)
             seconds["mitsuba"] = took * error / TARGET
             print(f"  run {repeat + 1} mitsuba: {mitsuba.spp:5d} spp in {took:5.1f} s, relMSE {error:.3e} -> "
                   f"{seconds['mitsuba']:7.1f} s to {TARGET:g}")

@@ -78,9 +78,11 @@ SAFETY_DEPTH = 10_000
 REFILL = TILE_PIXELS // 8
 # Paths this deep (light trapped in glass by total internal reflection, mostly) leave the wavefront for a small
 # one that takes DEEP_STEPS bounces per bounce of the large one: a long path must not hold its work item
-# (and every item after it) for thousands of bounces of the whole wavefront.
+# (and every item after it) for thousands of bounces of the whole wavefront.  Few steps let the deep paths of
+# several items share each step (a step of a few lanes costs as much as one of thousands): on the specular
+# box, 8-s renders reach ~25% more samples with 8 steps than with 32 or 256; with 1, items wait too long.
 DEEP_DEPTH = 32
-DEEP_STEPS = 256
+DEEP_STEPS = 8
 PATH_FIELDS = WALK_FIELDS + ("ticket", "radiance")
 
 
