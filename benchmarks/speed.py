@@ -42,7 +42,7 @@ from pathspace.accel import Accel
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
-from bdpt import reference_floor, rel_mse  # noqa: E402  (benchmarks are scripts; one helper for relMSE minus the reference's own)
+from bdpt import reference_floor, rel_mse  # noqa: E402  (benchmarks are scripts: shared relMSE helpers)
 from memory import measure as measure_memory  # noqa: E402
 
 ROOT = HERE.parent
@@ -112,9 +112,9 @@ def time_to_target(scene_name: str, args) -> None:
         seconds = {}
         for estimator in ESTIMATORS:
             result = ps.render(scene, estimator, time=args.time, seed=100 + repeat, threads=args.threads)
-            error = rel_mse(result, reference)
-            seconds[estimator] = result.stats["seconds"] * error / TARGET
-            print(f"  run {repeat + 1} {estimator:4s}: {result.stats['spp']:5d} spp in {result.stats['seconds']:5.1f} s, "
+            stats, error = result.stats, rel_mse(result, reference)
+            seconds[estimator] = stats["seconds"] * error / TARGET
+            print(f"  run {repeat + 1} {estimator:4s}: {stats['spp']:5d} spp in {stats['seconds']:5.1f} s, "
                   f"relMSE {error:.3e} -> {seconds[estimator]:7.1f} s to {TARGET:g}")
         if mitsuba is not None:
             image, took = mitsuba.render(seed=100 + repeat)

@@ -32,8 +32,9 @@ the estimate stays unbiased for any q in (0, 1].  Policies (``rr``):
                   grows by 1/0.9 per trapped bounce, and where the traps hold
                   much of the light (a glass sphere in a white furnace) a
                   limit from depth 5 made the standard error 1.5-6x larger
-                  (from depth 64: up to 1.6x; from 128: unchanged).  A light subpath's throughput is measured relative
-                  to the ray leaving the light, so that the choice does not
+                  (from depth 64: up to 1.6x; from 128: unchanged).  A
+                  light subpath's throughput is measured relative to the
+                  ray leaving the light, so that the choice does not
                   depend on the light's units.  Mitsuba 3 caps every vertex at
                   0.95, which gives infinite variance wherever the albedo
                   exceeds the cap (throughput then grows by albedo / cap per

@@ -204,8 +204,9 @@ def lens_samples(batch: Batch) -> Contributions | None:
     if not useful.size:
         return None
     if not batch.densities:
-        return Contributions.make(y.lane.take(useful), y.index.take(useful) + 1, 1, value[:, useful],
-                                  raster=raster[:, useful], flags=batch.lane_flags.take(y.lane.take(useful)))
+        lane = y.lane.take(useful)
+        return Contributions.make(lane, y.index.take(useful) + 1, 1, value[:, useful], raster=raster[:, useful],
+                                  flags=batch.lane_flags.take(lane))
     y, value, wi, lens = y.keep(useful), value[:, useful], wi[:, useful], lens[:, useful]
     pdf_fwd, pdf_back, we = pdf_fwd[useful], pdf_back[useful], we[useful]
     d = lens - y.p

@@ -193,8 +193,8 @@ class MLT(Estimator):
         """What the chains explore and what BDPT renders."""
         w = self.weights
         lines = [f"path-space MLT (Veach & Guibas 1997): {self.chains} chains over paths of {self.direct + 1} .. "
-                 f"{self.max_depth} segments, started from {self.bootstrap} bootstrap samples (pairs of walks) per length in "
-                 f"proportion to the {self.contribution}; mutations: bidirectional {w[0]:.2f}, lens perturbation "
+                 f"{self.max_depth} segments, started from {self.bootstrap} bootstrap samples (pairs of walks) per "
+                 f"length in proportion to the {self.contribution}; mutations: bidirectional {w[0]:.2f}, lens perturbation "
                  f"{w[1]:.2f}, caustic perturbation {w[2]:.2f}, multi-chain perturbation {w[3]:.2f}; expected-value "
                  "splatting"]
         if self.direct:

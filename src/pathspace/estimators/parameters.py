@@ -15,7 +15,8 @@ from ..mis import HEURISTICS, StrategySubset
 from ..roulette import POLICIES
 from .base import parameter
 
-__all__ = ["max_depth", "roulette_policy", "roulette_depth", "roulette_probability", "roulette_cap", "light_rr", "light_rr_depth", "light_rr_probability", "light_rr_cap",
+__all__ = ["max_depth", "roulette_policy", "roulette_depth", "roulette_probability", "roulette_cap", "light_rr",
+           "light_rr_depth", "light_rr_probability", "light_rr_cap",
            "mis_heuristic", "mis_beta", "mis_strategy", "mis_strategies", "diffuse_sampling", "light_selection",
            "light_measure", "pyramid", "underlying_rr", "underlying_rr_depth", "or_none"]
 

@@ -4,8 +4,8 @@ A render of ``spp`` samples per pixel is ``spp`` passes over the image.  Work
 items hold at most about ``tile_pixels`` lanes: a tile of a large image, or
 several passes of a small one (:func:`work_layout`); under a time budget the
 items start small and follow their own durations (:class:`_TimedItemSize`).
-Each (pass, tile) unit has its own random streams (see :mod:`pathspace.sampler`).  One worker thread
-per core runs the estimator's ``render_items`` on its own wavefront, taking
+Each (pass, tile) unit has its own random streams (see :mod:`pathspace.sampler`).
+One worker thread per core runs the estimator's ``render_items`` on its own wavefront, taking
 items as it needs them -- NumPy and Embree release the GIL in their inner
 loops -- and the main thread hands results to the film in item order, so the
 same seed gives the bit-identical image whatever the thread count.  Items

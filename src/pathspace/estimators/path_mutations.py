@@ -226,7 +226,8 @@ def _part(vertex: dict, idx: np.ndarray) -> dict:
 
 @dataclass
 class FreshPaths:
-    """Paths from independent pairs of walks (:func:`fresh_paths`; the paths of a pair share vertices): the paths, their values, ``density`` sum_j p_j
+    """Paths from independent pairs of walks (:func:`fresh_paths`; the paths of a pair share vertices): the
+    paths, their values, ``density`` sum_j p_j
     (0 where a path was not made) and ``pair``, the walk pair each path came from."""
 
     paths: Paths
@@ -242,8 +243,8 @@ class FreshPaths:
 
 
 def fresh_paths(space: Space, length: np.ndarray, slots: int, uniforms: Uniforms) -> FreshPaths:
-    """Paths of ``length`` (pairs,) segments from independent pairs of walks, BDPT's way for one length (Veach 1997, sec. 10.2):
-    for each pair of a light walk (a light point and L - 1 vertices) and a camera walk (L vertices from the
+    """Paths of ``length`` (pairs,) segments from independent pairs of walks, BDPT's way for one length
+    (Veach 1997, sec. 10.2): for each pair of a light walk (a light point and L - 1 vertices) and a camera walk (L vertices from the
     pinhole through a uniform film position), the L + 1 paths made of the first j light-walk vertices and the
     first L - j camera-walk vertices, joined by a shadow ray (j = 0: the camera walk found a light).  Each
     path's ``density`` sums its densities over the L + 1 splits (:func:`split_densities`), so f / density
