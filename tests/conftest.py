@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import copy
+import subprocess
+import sys
 import tomllib
 from pathlib import Path
 
@@ -13,6 +15,19 @@ from pathspace.validate import compare_estimates
 
 ROOT = Path(__file__).resolve().parent.parent
 CORNELL = ROOT / "scenes" / "cornell-box" / "scene.toml"
+
+
+def run_cli(*args, cwd=None) -> subprocess.CompletedProcess:
+    """``pathspace ARGS`` in a fresh interpreter, output captured."""
+    return subprocess.run([sys.executable, "-m", "pathspace.cli", *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd)
+
+
+def cornell_file(folder, width: int, height: int):
+    """The Cornell box scene file at ``width`` x ``height``, written to ``folder/scene.toml``."""
+    scene = folder / "scene.toml"
+    scene.write_text(CORNELL.read_text().replace("resolution = [256, 256]", f"resolution = [{width}, {height}]"))
+    return scene
 
 
 def scene_dict(name: str, resolution=(32, 32)) -> dict:

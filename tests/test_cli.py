@@ -5,7 +5,6 @@ import json
 import os
 import signal
 import subprocess
-import sys
 import time
 
 import numpy as np
@@ -16,19 +15,7 @@ from pathspace import metrics
 from pathspace.cli import main
 from pathspace.estimators import ESTIMATORS
 from pathspace.imageio import read_exr
-from conftest import CORNELL, ROOT
-
-
-def run_cli(*args, cwd=None):
-    return subprocess.run([sys.executable, "-m", "pathspace.cli", *map(str, args)], capture_output=True, text=True,
-                          cwd=cwd)
-
-
-def cornell_file(folder, width: int, height: int):
-    """The Cornell box scene file at ``width`` x ``height``, written to ``folder/scene.toml``."""
-    scene = folder / "scene.toml"
-    scene.write_text(CORNELL.read_text().replace("resolution = [256, 256]", f"resolution = [{width}, {height}]"))
-    return scene
+from conftest import CORNELL, ROOT, cornell_file, run_cli
 
 
 def test_render_and_compare(tmp_path):

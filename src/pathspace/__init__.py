@@ -7,10 +7,12 @@
     ref = ps.reference(scene, spp=4096)                      # cached
     ps.metrics.relmse(result.image, ref.image)
     ps.experiment.converge(scene, ["pt", "bdpt"], ref, time=10).plot()
+    client = ps.cluster.start_client(workers=2)              # Dask (the dask extra)
+    ps.render(scene, "bdpt", spp=1024, client=client)
 """
 __version__ = "0.1.0"
 
-from . import estimators, experiment, integrators, metrics, plot  # integrators: the old name, pointing to the new
+from . import cluster, estimators, experiment, integrators, metrics, plot  # integrators: the old name, pointing to the new
 from ._native import default_thread_count
 from .accel import Accel, Hits
 from .driver import RenderResult, render
@@ -26,6 +28,7 @@ __all__ = [
     "RenderResult",
     "Scene",
     "SceneError",
+    "cluster",
     "default_thread_count",
     "estimators",
     "experiment",

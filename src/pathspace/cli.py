@@ -1,4 +1,4 @@
-"""Command line: ``pathspace render | compare | info | reference | converge | export``.
+"""Command line: ``pathspace render | compare | info | reference | converge | export | cluster``.
 
     pathspace render scenes/cornell-box/scene.toml --spp 64 -o cornell.exr
     pathspace render SCENE --time 30 -p max_depth=8 -p rr=off --set camera.fov=30 -o out.exr
@@ -8,6 +8,9 @@
     pathspace reference SCENE [-e pt] [--spp 4096] [-o ref.exr]
     pathspace converge SCENE -e pt,lt,bdpt --time 60 --reference REF.exr [--seeds 3] [-o table.csv]
     pathspace export --mitsuba SCENE OUT.xml        # Mitsuba 3 scene XML, meshes in OUT-meshes/
+    pathspace render SCENE --spp 1024 --workers 2   # on a local Dask cluster (render, reference, converge)
+    pathspace render SCENE --spp 1024 --scheduler tcp://host:8786   # on a running Dask cluster
+    pathspace cluster slurm --jobs 10 --cores 16 --memory 64GB --walltime 02:00:00   # workers on a batch queue
 
 ``-p KEY=VALUE`` sets an estimator parameter (``render --help`` lists them
 all), ``--set KEY=VALUE`` changes the scene (``materials.white.reflectance=[0.5,0.5,0.5]``,
@@ -18,8 +21,9 @@ Output paths are checked before anything is rendered.  ``render`` saves its
 state to ``OUT.exr.state`` every ``--save-every`` seconds and when stopped by
 Ctrl-C (SIGINT) or SIGTERM -- then it writes the image of the completed
 passes, says how to resume, and exits with 130 or 143 -- and ``--resume``
-continues from it (see :mod:`pathspace.resume`).  Errors are one line on
-stderr and exit code 2.
+continues from it (see :mod:`pathspace.resume`); a render on a cluster
+(``--workers``, ``--scheduler``; see :mod:`pathspace.cluster`) keeps no
+state.  Errors are one line on stderr and exit code 2.
 """
 from __future__ import annotations
 
@@ -29,7 +33,9 @@ import math
 import shlex
 import signal
 import sys
+import time
 import warnings
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -101,6 +107,33 @@ def _scene_arguments(command: argparse.ArgumentParser) -> None:
                          metavar="KEY=VALUE", help="change the scene, repeatable (e.g. --set camera.fov=30)")
 
 
+def _cluster_arguments(command: argparse.ArgumentParser) -> None:
+    where = command.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, default=None, metavar="N",
+                       help="render on a local Dask cluster of N single-threaded worker processes (the dask extra)")
+    where.add_argument("--scheduler", default=None, metavar="ADDRESS",
+                       help="render on the Dask cluster of this scheduler (tcp://host:8786)")
+
+
+@contextmanager
+def _cluster_client(args):
+    """The Dask client that --workers or --scheduler asks for (None without them), closed at the end."""
+    if args.workers is None and args.scheduler is None:
+        yield None
+        return
+    from .cluster import start_client
+
+    if getattr(args, "threads", None) is not None:
+        raise ValueError("--threads: a render on a cluster runs single-threaded tasks; choose --workers instead")
+    client = start_client(workers=args.workers, scheduler=args.scheduler)
+    print(f"Dask cluster: {client.scheduler.address}, {sum(client.nthreads().values())} worker threads; "
+          f"dashboard {client.dashboard_link}")
+    try:
+        yield client
+    finally:
+        client.close()
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="pathspace", description="Light-transport research renderer.")
     parser.add_argument("--version", action="version", version=f"pathspace {__version__}")
@@ -131,6 +164,9 @@ def _build_parser() -> argparse.ArgumentParser:
     r.add_argument("--save-every", type=_seconds, default=60.0, metavar="SECONDS",
                    help="save the render's state to OUT.exr.state this often (default 60; 0: only when stopped by "
                         "Ctrl-C or SIGTERM); the file is removed once the image is written")
+    _cluster_arguments(r)
+    r.add_argument("--task-passes", type=int, default=None, metavar="N",
+                   help="passes per cluster task (default: about eight tasks per worker)")
     r.add_argument("--resume", action="store_true",
                    help="continue the render saved in OUT.exr.state (same scene, estimator, parameters, seed, budget "
                         "and colour mode); without a state file, start from the beginning")
@@ -155,6 +191,7 @@ def _build_parser() -> argparse.ArgumentParser:
     f.add_argument("--force", action="store_true", help="render even if a cached reference matches")
     f.add_argument("-o", "--output", default=None, help="also copy the reference to this EXR")
     f.add_argument("--quiet", "-q", action="store_true", help="no progress bar")
+    _cluster_arguments(f)
 
     v = commands.add_parser("converge", help="error against render time of several estimators, from one run each")
     _scene_arguments(v)
@@ -169,12 +206,23 @@ def _build_parser() -> argparse.ArgumentParser:
     v.add_argument("--metric", default="relmse", choices=sorted(metrics.METRICS), help="metric to plot and fit")
     v.add_argument("-o", "--output", default="convergence.csv", help="CSV table (the plot goes beside it, .png)")
     v.add_argument("--threads", type=int, default=None)
+    _cluster_arguments(v)
 
     x = commands.add_parser("export", help="write a scene for another renderer (Mitsuba 3: scene XML, PLY meshes)")
     target = x.add_mutually_exclusive_group(required=True)
     target.add_argument("--mitsuba", action="store_true", help="Mitsuba 3 scene XML; meshes go to OUT-meshes/ beside it")
     _scene_arguments(x)
     x.add_argument("output", help="output file (OUT.xml)")
+
+    q = commands.add_parser("cluster", help="start Dask workers on a batch queue (dask-jobqueue) and wait")
+    q.add_argument("kind", choices=("slurm", "pbs", "sge", "lsf"), help="the batch system")
+    q.add_argument("--jobs", type=int, default=1, help="jobs to submit (default 1)")
+    q.add_argument("--cores", type=int, required=True, help="cores per job (one worker process each)")
+    q.add_argument("--memory", required=True, help="memory per job, e.g. 64GB")
+    q.add_argument("--walltime", default="01:00:00", help="time limit per job (default 01:00:00)")
+    q.add_argument("--queue", default=None, help="queue or partition")
+    q.add_argument("--account", default=None, help="account to charge")
+    q.add_argument("--dry-run", action="store_true", help="print the job script and stop (submits nothing)")
     return parser
 
 
@@ -216,13 +264,24 @@ def _render(args) -> int:
     if state is None and args.resume:
         raise ValueError(f"--resume: estimator {estimator.name!r} renders with its own loop (Markov chains): its "
                          "renders cannot be saved and resumed")
+    on_cluster = args.workers is not None or args.scheduler is not None
+    if on_cluster:
+        if args.resume:
+            raise ValueError("--resume: a render on a cluster keeps no state file")
+        if args.time is not None:
+            raise ValueError("--time: a render on a cluster takes --spp (its tasks are pass ranges)")
+        state = None
+    elif args.task_passes is not None:
+        raise ValueError("--task-passes: only for renders on a cluster (--workers or --scheduler)")
     scene = _load(args)
     if args.resume and not state.exists():
         print(f"no saved state at {state}: starting from the beginning")
-    result = render(scene, estimator, spp=args.spp, time=args.time, seed=args.seed, threads=args.threads,
-                    progress=not args.quiet, spectral=args.spectral, wavelength_sampling=args.wavelengths,
-                    state_file=state, save_every=(args.save_every or None) if state else None, resume=args.resume,
-                    keep_state=state is not None, stop_on_signal=True)
+    with _cluster_client(args) as client:
+        options = (dict(client=client, task_passes=args.task_passes) if on_cluster else
+                   dict(threads=args.threads, state_file=state, save_every=(args.save_every or None) if state else None,
+                        resume=args.resume, keep_state=state is not None, stop_on_signal=True))
+        result = render(scene, estimator, spp=args.spp, time=args.time, seed=args.seed, progress=not args.quiet,
+                        spectral=args.spectral, wavelength_sampling=args.wavelengths, **options)
     stats = result.stats
     written = _write_render(out, result, args) if stats["spp"] or not stats["stopped"] else []
     print(f"colour: {stats['mode']} ({stats['mode_reason']})")
@@ -281,8 +340,9 @@ def _reference(args) -> int:
     if args.output:
         _writable(Path(args.output))
     _estimator(args)
-    result = reference(_load(args), args.estimator, spp=args.spp, seed=args.seed, folder=args.cache, force=args.force,
-                       progress=not args.quiet, **dict(args.param))
+    with _cluster_client(args) as client:
+        result = reference(_load(args), args.estimator, spp=args.spp, seed=args.seed, folder=args.cache,
+                           force=args.force, progress=not args.quiet, client=client, **dict(args.param))
     print(result.summary())
     print(f"cached at {result.path}")
     if args.output:
@@ -304,8 +364,9 @@ def _converge(args) -> int:
     for spec in specs:
         spec.make()  # unknown estimators, keys and bad values fail before anything is loaded
     reference, _, _ = read_exr(args.reference)
-    result = converge(_load(args), specs, reference, time=args.time, spp=args.spp,
-                      checkpoints=checkpoints, seeds=range(args.seeds), threads=args.threads)
+    with _cluster_client(args) as client:
+        result = converge(_load(args), specs, reference, time=args.time, spp=args.spp, checkpoints=checkpoints,
+                          seeds=range(args.seeds), **(dict(client=client) if client else dict(threads=args.threads)))
     with atomic_output(out) as temporary:
         result.to_csv(temporary)
     axes = convergence_plot(result, args.metric)
@@ -329,6 +390,28 @@ def _export(args) -> int:
     return 0
 
 
+def _cluster(args) -> int:
+    from .cluster.client import jobqueue_cluster
+
+    if args.jobs < 1 or args.cores < 1:
+        raise ValueError(f"--jobs and --cores: expected integers >= 1, got {args.jobs} and {args.cores}")
+    cluster = jobqueue_cluster(args.kind, cores=args.cores, memory=args.memory, walltime=args.walltime,
+                               queue=args.queue, account=args.account)
+    try:
+        if args.dry_run:
+            print(cluster.job_script())
+            return 0
+        cluster.scale(jobs=args.jobs)
+        print(f"Dask scheduler {cluster.scheduler_address}; dashboard {cluster.dashboard_link}\n"
+              f"{args.jobs} job(s) of {args.cores} single-threaded workers submitted; render on them with\n"
+              f"  pathspace render SCENE --scheduler {cluster.scheduler_address} ...\n"
+              "or ps.render(..., client=Client(address)); Ctrl-C stops the cluster and its jobs")
+        while True:
+            time.sleep(3600)
+    finally:
+        cluster.close()
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of the ``pathspace`` command: the exit code (0; 2 for an error, reported in one line
     on stderr; 130 or 143 for a render stopped by SIGINT or SIGTERM)."""
@@ -336,7 +419,7 @@ def main(argv: list[str] | None = None) -> int:
     args = _build_parser().parse_args(argv)
     args.argv = argv
     commands = {"render": _render, "compare": _compare, "info": _info, "reference": _reference, "converge": _converge,
-                "export": _export}
+                "export": _export, "cluster": _cluster}
     try:
         return commands[args.command](args)
     except (SceneError, ValueError, OSError, ImportError) as error:

@@ -149,7 +149,8 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
            checkpoints: Sequence[float] = (), on_checkpoint: Callable[[Checkpoint], None] | None = None,
            samplers: SamplerSource | None = None, state_file: str | os.PathLike | None = None,
            save_every: float | None = None, resume: bool = False, keep_state: bool = False,
-           stop_on_signal: bool = False, **params: Any) -> RenderResult:
+           stop_on_signal: bool = False, client: Any = None, task_passes: int | None = None,
+           **params: Any) -> RenderResult:
     """Render ``scene`` with an estimator (a name and its ``params``, or an :class:`Estimator`).
 
     ``spp`` samples (passes) per pixel (default: the scene's ``[render]`` spp, else 16), or ``time``: the
@@ -183,6 +184,12 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
     -- the passes in flight are dropped, the state is saved, and the result
     of the completed passes is returned with ``stats["stopped"]`` naming the
     signal -- instead of raising KeyboardInterrupt (or ending the process).
+
+    ``client``: a ``dask.distributed.Client``; the render's passes then run as single-threaded tasks of
+    ``task_passes`` passes each (default: about eight tasks per worker thread) on the cluster's workers, and
+    their films are merged in pass order (see :mod:`pathspace.cluster`): the image equals this render
+    without a client to rounding.  Such a render takes ``spp`` (not ``time``), no ``threads``, checkpoints,
+    state file or samplers, and an estimator on the passes loop (not a Markov chain).
     """
     if not isinstance(scene, Scene):
         scene = load_scene(scene)
@@ -192,6 +199,7 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
     spp = None if spp is None else integer(spp, "spp", low=1)
     time = None if time is None else number(time, "time", low=0.0, low_open=True, what="a number of seconds > 0")
     seed, first_pass = integer(seed, "seed", low=0), integer(first_pass, "first_pass", low=0)
+    threads_given = threads is not None
     threads = integer(_native.default_thread_count() if threads is None else threads, "threads", low=1)
     checkpoints = tuple(sorted(number(c, "checkpoints", low=0.0, low_open=True) for c in checkpoints))
     if state_file is None and (save_every is not None or resume or keep_state):
@@ -202,6 +210,17 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
     estimator = estimator if isinstance(estimator, Estimator) else make_estimator(estimator, **params)
     estimator.check(scene)
     mode, mode_reason = colour_mode(scene, spectral, wavelength_sampling)
+    if client is not None or task_passes is not None:
+        _check_distributable(client, estimator, spp, checkpoints, samplers, state_file, stop_on_signal,
+                             threads_given)
+        from .cluster.render import render_on_cluster
+
+        run = render_on_cluster(client, scene, estimator, mode, spp=spp, seed=seed, first_pass=first_pass,
+                                spectral=spectral, wavelength_sampling=wavelength_sampling, progress=progress,
+                                task_passes=task_passes)
+        return _result(scene, estimator, mode, mode_reason, run.film, run.counters, run.stats,
+                       threads=run.threads, seed=seed, first_pass=first_pass, budget={"spp": spp, "time": None},
+                       seconds=run.seconds)
     check_render_memory(scene, estimator, mode, threads)  # refuse, naming the setting, before the film exists
     _tune_allocator()
     identity = state = None
@@ -241,14 +260,28 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
             autosave.save(Checkpoint(film.passes, seconds, film))
         elif not keep_state:
             autosave.path.unlink(missing_ok=True)
+    resumed = {"passes": restored, "seconds": previous} if state is not None else None
+    extra = {**job.stats, "state_file": None if state_file is None else str(state_file),
+             "saves": 0 if autosave is None else autosave.saves}
+    return _result(scene, estimator, mode, mode_reason, film, job.counters, extra, threads=threads, seed=seed,
+                   first_pass=first_pass, budget={"spp": spp, "time": time}, seconds=seconds,
+                   previous=previous, restored_samples=restored_samples, stopped=stopped, resumed=resumed)
+
+
+def _result(scene: Scene, estimator: Estimator, mode, mode_reason: str, film: Film, counters, extra: dict, *,
+            threads: int, seed: int, first_pass: int, budget: dict, seconds: float, previous: float = 0.0,
+            restored_samples: int = 0, stopped: str | None = None, resumed: dict | None = None) -> RenderResult:
+    """The result of a render that has filled ``film``: its images, warnings and statistics (``counters``:
+    what the workers counted; ``extra``: statistics the estimator or the render loop add; ``previous``
+    seconds and ``restored_samples`` of earlier sessions of a resumed render)."""
     warnings = (estimator.warnings(scene) + second_moment_warnings(film)
-                + path_length_warnings(job.counters.longest, job.counters.truncated))
+                + path_length_warnings(counters.longest, counters.truncated))
     warnings += [] if scene.lights.count else ["the scene has no lights: the image is black"]
     if not film.passes:
         warnings.append(f"stopped ({stopped}) before any pass was complete: the image is empty" if stopped else
-                        f"no pass was complete when the time budget ({time:g} s) ran out: the image is empty; "
-                        "give more time (one pass of this scene takes longer)")
-    samples, counters = int(film.count.sum()), job.counters
+                        f"no pass was complete when the time budget ({budget['time']:g} s) ran out: the image is "
+                        "empty; give more time (one pass of this scene takes longer)")
+    samples = int(film.count.sum())
     session = seconds - previous  # render seconds of this call: what the rates and counters cover
 
     def rate(count: int) -> float:
@@ -262,10 +295,8 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
              "nonfinite": film.nonfinite, "nonfinite_contributions": counters.nonfinite_contributions,
              "truncated": counters.truncated, "longest_subpath": counters.longest,
              "largest_sample_share": second_moment_share(film)[0], "warnings": warnings, "clock": CLOCK,
-             "scene": scene.source, "budget": {"spp": spp, "time": time}, "stopped": stopped,
-             "resumed": {"passes": restored, "seconds": previous} if state is not None else None,
-             "state_file": None if state_file is None else str(state_file),
-             "saves": 0 if autosave is None else autosave.saves, **job.stats}
+             "scene": scene.source, "budget": budget, "stopped": stopped, "resumed": resumed,
+             "state_file": None, "saves": 0, **extra}
     variance = film.image_variance() if estimator.independent_passes else np.full(film.image().shape, np.nan)
     return RenderResult(image=film.image(), variance=variance, stats=stats, film=film,
                         xyz=film.mean() if mode.name == "spectral" else None)
@@ -275,6 +306,27 @@ def can_save_state(estimator: Estimator) -> bool:
     """Whether renders with ``estimator`` can be saved to a state file and resumed: estimators on the passes
     loop (whole, independent passes); not those with their own loop (Markov chains)."""
     return type(estimator).render is Estimator.render
+
+
+def _check_distributable(client: Any, estimator: Estimator, spp: int | None, checkpoints: tuple, samplers,
+                         state_file, stop_on_signal: bool, threads: bool) -> None:
+    """Refuse a render on a cluster that its tasks could not reproduce, naming the setting."""
+    if client is None:
+        raise ValueError("task_passes: only for renders on a cluster (give client=)")
+    if spp is None:
+        raise ValueError("time: a render on a cluster takes spp (its tasks are pass ranges); sweeps and "
+                         "convergence runs on a cluster take time budgets per cell")
+    if not can_save_state(estimator):
+        raise ValueError(f"client: estimator {estimator.name!r} renders with its own loop of correlated passes "
+                         "(Markov chains), which cannot be split into tasks; render independent seeds as the "
+                         "cells of a sweep instead")
+    for name, value in (("checkpoints", checkpoints), ("samplers", samplers), ("state_file", state_file),
+                        ("stop_on_signal", stop_on_signal)):
+        if value:
+            raise ValueError(f"{name}: not available for renders on a cluster")
+    if threads:
+        raise ValueError("threads: a render on a cluster runs one single-threaded task per worker thread; "
+                         "choose the workers' threads when starting them")
 
 
 def _check_resumable(scene: Scene, estimator: Estimator, samplers: SamplerSource | None) -> None:

@@ -25,13 +25,22 @@ from .imageio import atomic_output, read_exr, write_exr
 from .metrics import predicted_relmse
 from .scene import Scene, load_scene
 
-__all__ = ["Reference", "reference", "cache_folder"]
+__all__ = ["Reference", "reference", "cache_folder", "cache_root", "cache_key"]
+
+
+def cache_root() -> Path:
+    """The root of pathspace's caches: ``$PATHSPACE_CACHE``, default ``~/.cache/pathspace``."""
+    return Path(os.environ.get("PATHSPACE_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "pathspace"))
 
 
 def cache_folder() -> Path:
     """Where references are cached: ``$PATHSPACE_CACHE/references``, default ``~/.cache/pathspace/references``."""
-    root = os.environ.get("PATHSPACE_CACHE") or os.path.join(os.path.expanduser("~"), ".cache", "pathspace")
-    return Path(root) / "references"
+    return cache_root() / "references"
+
+
+def cache_key(inputs: dict[str, Any]) -> str:
+    """The key of a cached render: a hash of everything it depends on (``inputs``, JSON-able)."""
+    return hashlib.sha256(json.dumps(inputs, sort_keys=True, default=str).encode()).hexdigest()[:20]
 
 
 @dataclass
@@ -55,15 +64,16 @@ class Reference:
 
 def reference(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: int = 4096, seed: int = 1,
               spectral: bool | None = None, folder: str | os.PathLike | None = None, force: bool = False,
-              threads: int | None = None, progress: bool = False, **params: Any) -> Reference:
+              threads: int | None = None, progress: bool = False, client: Any = None, **params: Any) -> Reference:
     """The reference of ``scene``: from the cache if one with the same inputs exists (and not ``force``),
-    else rendered with ``estimator`` (and its ``params``) at ``spp`` and cached."""
+    else rendered with ``estimator`` (and its ``params``) at ``spp`` and cached -- on the cluster of
+    ``client`` (a ``dask.distributed.Client``) if given (see :mod:`pathspace.cluster`)."""
     from .driver import render
 
     scene = scene if isinstance(scene, Scene) else load_scene(scene)
     inputs = {"scene": scene.fingerprint, "estimator": estimator, "params": dict(sorted(params.items())),
               "spp": int(spp), "seed": int(seed), "spectral": spectral}
-    key = hashlib.sha256(json.dumps(inputs, sort_keys=True, default=str).encode()).hexdigest()[:20]
+    key = cache_key(inputs)
     folder = Path(folder) if folder is not None else cache_folder()
     stem = (Path(scene.source).parent.name if scene.source else "scene") + f"-{estimator}-{spp}spp-{key}"
     path = folder / f"{stem}.exr"
@@ -73,7 +83,7 @@ def reference(scene: Scene | str | os.PathLike, estimator: str = "pt", *, spp: i
             image, variance, _ = read_exr(path)
             return Reference(image.astype(np.float64), variance.astype(np.float64), metadata, path, cached=True)
     result = render(scene, estimator, spp=spp, seed=seed, spectral=spectral, threads=threads, progress=progress,
-                    **params)
+                    client=client, **params)
     predicted = predicted_relmse(result.image, result.variance, result.film.count.reshape(result.image.shape[:2]))
     metadata = {"key": key, **inputs, "scene_source": scene.source, "mode": result.stats["mode"],
                 "seconds": result.stats["seconds"], "width": result.stats["width"], "height": result.stats["height"],

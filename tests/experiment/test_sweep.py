@@ -90,3 +90,21 @@ def test_a_markov_chain_sweep_flags_a_truncated_depth():
     cells = result.cells.set_index("max_depth")
     assert cells.loc[2, "biased"] and not cells.loc[16, "biased"]
     assert np.isnan(result.table["variance_per_sample"]).all()
+
+
+def test_a_cell_whose_render_fails_is_reported_and_the_others_finish(tmp_path):
+    """light_sampling='none' cannot reach a point light: the scene refuses it when it renders.  The cell is
+    marked failed with the error, the other renders and is pooled; ``on_render`` sees each finished render;
+    with a cache, a second run renders nothing it has (the same seconds)."""
+    scene = ps.scene_from_dict(scene_dict("cornell-box-point-light", (8, 8)))
+    seen = []
+    result = sweep(scene, "pt", {"light_sampling": ["none", "mis"]}, np.zeros((8, 8, 3)), spp=2, seeds=(0, 1),
+                   on_render=seen.append, cache=tmp_path)
+    assert [(row["light_sampling"], row["seed"]) for row in seen] == [("mis", 0), ("mis", 1)]
+    assert list(result.failed["light_sampling"]) == ["none"]
+    error = result.failed["error"].iloc[0]
+    assert "cannot reach point" in error and "seed 0: ValueError" in error and "seed 1: ValueError" in error
+    assert list(result.table["light_sampling"]) == ["mis", "mis"]
+    again = sweep(scene, "pt", {"light_sampling": ["none", "mis"]}, np.zeros((8, 8, 3)), spp=2, seeds=(0, 1),
+                  cache=tmp_path)
+    assert list(again.table["seconds"]) == list(result.table["seconds"])

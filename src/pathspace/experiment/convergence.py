@@ -120,12 +120,13 @@ def _mean_over_seeds(frame, column: str):
 def converge(scene, estimators: Sequence[Any], reference: Any, *, time: float | None = None, spp: int | None = None,
              checkpoints: Sequence[float] | None = None, seeds: Sequence[int] = (0,),
              metrics: Sequence[str] = DEFAULT_METRICS, threads: int | None = None, keep_images: bool = False,
-             progress: bool = False) -> Convergence:
+             progress: bool = False, client: Any = None) -> Convergence:
     """Run every estimator (names, (name, params) pairs or :class:`EstimatorSpec` s) once per seed on
     ``scene`` for ``time`` seconds or ``spp`` samples per pixel, developing the film at ``checkpoints``
-    (default: log-spaced) and at the end, and compare each snapshot with ``reference``."""
-    from ..driver import render
+    (default: log-spaced) and at the end, and compare each snapshot with ``reference``.
 
+    ``client``: a ``dask.distributed.Client``; every run (estimator and seed) is then a task rendering on
+    one worker thread, and the runs go on side by side (see :mod:`pathspace.cluster`)."""
     pd = pandas()
     if (time is None) == (spp is None):
         raise ValueError("give either time (seconds) or spp")
@@ -133,19 +134,50 @@ def converge(scene, estimators: Sequence[Any], reference: Any, *, time: float | 
     if unknown:
         raise ValueError(f"metrics: unknown {unknown}; known: {', '.join(METRICS)}")
     specs = [EstimatorSpec.parse(e) for e in estimators]
+    for spec in specs:
+        spec.make()  # parameter errors surface here, before any render
     ref, _ = reference_image(reference)
     points = list(checkpoints) if checkpoints is not None else default_checkpoints(spp, time)
+    runs = [(spec, seed) for spec in specs for seed in seeds]
+    if client is not None:
+        from ..cluster.tasks import converge_run
+        from ..cluster.work import run_tasks
+
+        if threads is not None:
+            raise ValueError("threads: runs on a cluster render on one worker thread each")
+        outputs = [None] * len(runs)
+        for index, output in run_tasks(client, scene, converge_run, [dict(spec=spec, seed=seed) for spec, seed in runs],
+                                       shared=dict(reference=ref, spp=spp, seconds=time, checkpoints=points,
+                                                   metrics=tuple(metrics), keep_images=keep_images),
+                                       progress=progress, unit="run"):
+            if isinstance(output, BaseException):
+                raise output
+            outputs[index] = output
+    else:
+        outputs = [run_with_snapshots(scene, spec, seed, ref, spp=spp, seconds=time, checkpoints=points,
+                                      metrics=tuple(metrics), keep_images=keep_images, threads=threads,
+                                      progress=progress) for spec, seed in runs]
     rows: list[dict] = []
     images: dict = {}
-    for spec in specs:
-        for seed in seeds:
-            snapshot = _Snapshots(spec, seed, ref, tuple(metrics), keep_images)
-            result = render(scene, spec.make(), spp=spp, time=time, seed=seed, threads=threads, progress=progress,
-                            checkpoints=points, on_checkpoint=snapshot)
-            snapshot.record(result.film, result.stats["seconds"], final=True)
-            rows += snapshot.rows
-            images.update(snapshot.images)
+    for run_rows, run_images in outputs:
+        rows += run_rows
+        images.update(run_images)
     return Convergence(pd.DataFrame(rows), tuple(metrics), images)
+
+
+def run_with_snapshots(scene, spec: EstimatorSpec, seed: int, reference: np.ndarray, *, spp: int | None,
+                       seconds: float | None, checkpoints: Sequence[float], metrics: tuple[str, ...],
+                       keep_images: bool, threads: int | None = None,
+                       progress: bool = False) -> tuple[list[dict], dict]:
+    """One convergence run: ``spec`` with ``seed`` for ``spp`` passes or ``seconds``, a table row per
+    checkpoint and at the end; (rows, kept images)."""
+    from ..driver import render
+
+    snapshot = _Snapshots(spec, seed, reference, metrics, keep_images)
+    result = render(scene, spec.make(), spp=spp, time=seconds, seed=seed, threads=threads, progress=progress,
+                    checkpoints=checkpoints, on_checkpoint=snapshot)
+    snapshot.record(result.film, result.stats["seconds"], final=True)
+    return snapshot.rows, snapshot.images
 
 
 class _Snapshots:

@@ -23,18 +23,26 @@ seeds' image means (and block means), tested with Student-t quantiles of
 seeds - 1 degrees of freedom (two seeds or more; with one, the cell is not
 tested; with few seeds the test is weak but keeps its false-alarm rate), and
 their per-render variance columns are NaN.
+
+A render that raises marks its cell failed (column ``error``, :attr:`Sweep.failed`) and
+the sweep goes on.  With a Dask ``client`` every cell and seed is a task on the cluster
+(:mod:`pathspace.cluster`), and finished renders are cached
+(:mod:`pathspace.experiment.cache`) so that a sweep run again renders only what it is missing.
 """
 from __future__ import annotations
 
 import itertools
 import json
+import os
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
 from ..metrics import METRICS
+from ..scene import load_scene
 from ..validate import compare_estimates
+from .cache import CellCache
 from .convergence import pandas, reference_image
 from .specs import EstimatorSpec
 
@@ -56,46 +64,118 @@ class Sweep:
     parameters: tuple[str, ...]
 
     def best(self, by: str = "efficiency"):
-        """The unbiased cell with the highest mean ``by``."""
-        candidates = self.cells[~self.cells["biased"]]
+        """The unbiased cell with the highest mean ``by`` (cells that failed are left out)."""
+        candidates = self.cells[self.cells["biased"].eq(False) & self.cells["error"].isna()]
         return candidates.loc[candidates[by].idxmax()] if len(candidates) else None
+
+    @property
+    def failed(self):
+        """The cells whose render raised, with the error (column ``error``)."""
+        return self.cells[self.cells["error"].notna()]
 
 
 def sweep(scene, estimator: Any, grid: dict[str, Sequence[Any]], reference: Any, *, spp: int | None = None,
           time: float | None = None, seeds: Sequence[int] = (0, 1), metrics: Sequence[str] = ("relmse", "mse"),
-          alpha: float = 1e-3, block: int = 8, threads: int | None = None, progress: bool = False) -> Sweep:
+          alpha: float = 1e-3, block: int = 8, threads: int | None = None, progress: bool = False,
+          client: Any = None, cache: Any = None, on_render: Callable[[dict], None] | None = None) -> Sweep:
     """Render ``estimator`` (a name, (name, fixed params) or spec) for every cell of ``grid`` and every seed,
-    with ``spp`` samples per pixel or ``time`` seconds each; see the module docstring."""
-    from ..driver import render
+    with ``spp`` samples per pixel or ``time`` seconds each; see the module docstring.
 
+    Parameter values are checked before anything renders (a bad one raises).  A render that raises (the
+    scene refuses the setting, a worker fails) marks its cell failed: its ``error`` column holds the
+    message, and the other cells finish.  ``client``: a ``dask.distributed.Client``; every cell and seed
+    is then a task rendering on one worker thread (see :mod:`pathspace.cluster`).  ``cache``: a folder,
+    True, False, or None -- cache finished renders when on a cluster -- so that a sweep run again renders
+    only what it is missing (:mod:`pathspace.experiment.cache`).  ``on_render(row)`` is called with each
+    render's table row as it finishes (cached ones first), for watching a long sweep."""
     pd = pandas()
     if (time is None) == (spp is None):
         raise ValueError("give either time (seconds) or spp")
+    if client is not None and threads is not None:
+        raise ValueError("threads: cells on a cluster render on one worker thread each")
     spec = EstimatorSpec.parse(estimator)
     ref, ref_variance = reference_image(reference)
     if ref_variance is None:
         ref_variance = np.zeros_like(ref)
-    rows, cells = [], []
-    for cell in grid_cells(grid):
-        estimator_instance = spec.make(**cell)  # parameter errors surface here, before any render
-        results = []
-        for seed in seeds:
-            result = render(scene, estimator_instance, spp=spp, time=time, seed=seed, threads=threads,
-                            progress=progress)
-            results.append(result)
-            rows.append({**cell, "seed": seed, **_row(result, ref, metrics)})
-        warnings = sorted({w for r in results for w in r.stats["warnings"]})
-        means = pd.DataFrame(rows[-len(seeds):])[["efficiency", "inverse_variance_time", "variance_per_sample",
-                                                 "time_per_sample", *metrics]].mean()
-        cells.append({**cell, **_pooled(results, ref, ref_variance, alpha, block,
-                                        independent=estimator_instance.independent_passes), **means.to_dict(),
-                      "warnings": warnings})
-    table = pd.DataFrame(rows)
-    summary = pd.DataFrame(cells)
-    for frame in (table, summary):
+    cells = grid_cells(grid)
+    estimators = [spec.make(**cell) for cell in cells]  # parameter errors surface here, before any render
+    if isinstance(scene, (str, os.PathLike)):
+        scene = load_scene(scene)
+    store = CellCache.choose(cache, client is not None)
+    jobs = [(c, seed) for c in range(len(cells)) for seed in seeds]
+    keys = {job: store.key(scene, estimators[job[0]], job[1], spp, time) for job in jobs} if store else {}
+    outcomes, job_rows, summaries = {}, {}, {}
+
+    def finished(job: tuple[int, int], outcome) -> None:
+        """Tabulate a finished render; pool its cell once every seed is in (then its images are let go)."""
+        outcomes[job] = outcome
+        if not isinstance(outcome, BaseException):
+            job_rows[job] = {**cells[job[0]], "seed": job[1], **_row(outcome, ref, metrics)}
+            if on_render is not None:
+                on_render(job_rows[job])
+        c = job[0]
+        if all((c, seed) in outcomes for seed in seeds):
+            renders = [(seed, outcomes.pop((c, seed))) for seed in seeds]
+            summaries[c] = _summary(cells[c], renders, [job_rows[(c, seed)] for seed, r in renders
+                                                        if not isinstance(r, BaseException)],
+                                    ref, ref_variance, alpha, block, metrics, estimators[c].independent_passes)
+
+    for job in jobs:
+        cached = store.get(keys[job]) if store else None
+        if cached is not None:
+            finished(job, cached)
+    missing = [job for job in jobs if job not in job_rows]
+    for job, outcome in _renders(scene, estimators, missing, spp, time, threads, progress, client):
+        if store and not isinstance(outcome, BaseException):
+            store.put(keys[job], outcome)
+        finished(job, outcome)
+    table = pd.DataFrame([job_rows[job] for job in jobs if job in job_rows])
+    summary_table = pd.DataFrame([summaries[c] for c in range(len(cells))])
+    for frame in (table, summary_table):
         frame.insert(0, "estimator", spec.label)
         frame.insert(1, "fixed", json.dumps(spec.params, sort_keys=True, default=str))
-    return Sweep(table, summary, tuple(grid))
+    return Sweep(table, summary_table, tuple(grid))
+
+
+def _summary(cell: dict, renders: list[tuple[int, Any]], rows: list[dict], reference: np.ndarray,
+             reference_variance: np.ndarray, alpha: float, block: int, metrics: Sequence[str],
+             independent: bool) -> dict:
+    """A cell's line of the summary from its renders ((seed, render or the exception it raised)) and their
+    table ``rows``: the pooled test against the reference, the mean of each statistic, the warnings, and
+    the errors of failed renders (``error``; None if every render finished)."""
+    errors = [f"seed {seed}: {type(r).__name__}: {r}" for seed, r in renders if isinstance(r, BaseException)]
+    results = [r for _, r in renders if not isinstance(r, BaseException)]
+    summary = {**cell, "error": "; ".join(errors) if errors else None}
+    if not results:
+        return {**summary, "biased": None, "warnings": []}
+    means = pandas().DataFrame(rows)[["efficiency", "inverse_variance_time", "variance_per_sample",
+                                      "time_per_sample", *metrics]].mean()
+    return {**summary, **_pooled(results, reference, reference_variance, alpha, block, independent=independent),
+            **means.to_dict(), "warnings": sorted({w for r in results for w in r.stats["warnings"]})}
+
+
+def _renders(scene, estimators: list, jobs: list[tuple[int, int]], spp: int | None, seconds: float | None,
+             threads: int | None, progress: bool, client: Any) -> Iterator[tuple[tuple[int, int], Any]]:
+    """((cell, seed), render or the exception it raised) for every job, as each finishes: in this process,
+    one after the other, or as tasks on ``client``'s cluster."""
+    if client is not None:
+        from ..cluster.tasks import render_cell
+        from ..cluster.work import run_tasks
+
+        tasks = [dict(estimator=estimators[c], seed=seed) for c, seed in jobs]
+        for index, outcome in run_tasks(client, scene, render_cell, tasks, shared=dict(spp=spp, seconds=seconds),
+                                        progress=progress, unit="cell"):
+            yield jobs[index], outcome
+        return
+    from ..driver import render
+
+    for c, seed in jobs:
+        try:
+            outcome = render(scene, estimators[c], spp=spp, time=seconds, seed=seed, threads=threads,
+                             progress=progress)
+        except Exception as error:  # the cell fails, the sweep goes on
+            outcome = error
+        yield (c, seed), outcome
 
 
 def _row(result, reference: np.ndarray, metrics: Sequence[str]) -> dict:

@@ -57,6 +57,11 @@ class Scene:
         triangles = self.mesh.indices[self.lights.area.triangles]
         return Accel(self.mesh.vertices.astype(np.float32), np.ascontiguousarray(triangles))
 
+    def __getstate__(self) -> dict:
+        """What pickling keeps (a scene shipped to a worker process): everything but the BVHs, which the
+        receiving process builds on first use."""
+        return {k: v for k, v in self.__dict__.items() if k not in ("accel", "emitter_accel")}
+
     def to_world(self, points: np.ndarray) -> np.ndarray:
         """World positions (float64) of render-space ``points`` (..., 3)."""
         return np.asarray(points, dtype=np.float64) + self.origin
