@@ -12,7 +12,8 @@
 """
 __version__ = "0.1.0"
 
-from . import cluster, estimators, experiment, integrators, metrics, plot  # integrators: the old name, pointing to the new
+# integrators: the old name, pointing to the new; cluster: Dask, imported only when a client is used
+from . import cluster, estimators, experiment, integrators, metrics, plot
 from ._native import default_thread_count
 from .accel import Accel, Hits
 from .driver import RenderResult, render

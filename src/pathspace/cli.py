@@ -41,6 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from . import __version__, metrics
+from .cluster.client import JOBQUEUE_KINDS
 from .contact_sheet import strategy_layers, write_contact_sheet
 from .driver import RenderResult, can_save_state, render
 from .estimators import ESTIMATORS, Estimator, make_estimator
@@ -215,13 +216,13 @@ def _build_parser() -> argparse.ArgumentParser:
     x.add_argument("output", help="output file (OUT.xml)")
 
     q = commands.add_parser("cluster", help="start Dask workers on a batch queue (dask-jobqueue) and wait")
-    q.add_argument("kind", choices=("slurm", "pbs", "sge", "lsf"), help="the batch system")
+    q.add_argument("kind", choices=sorted(JOBQUEUE_KINDS), help="the batch system")
     q.add_argument("--jobs", type=int, default=1, help="jobs to submit (default 1)")
     q.add_argument("--cores", type=int, required=True, help="cores per job (one worker process each)")
     q.add_argument("--memory", required=True, help="memory per job, e.g. 64GB")
     q.add_argument("--walltime", default="01:00:00", help="time limit per job (default 01:00:00)")
     q.add_argument("--queue", default=None, help="queue or partition")
-    q.add_argument("--account", default=None, help="account to charge")
+    q.add_argument("--account", default=None, help="account (SLURM, PBS) or project (SGE, LSF) to charge")
     q.add_argument("--dry-run", action="store_true", help="print the job script and stop (submits nothing)")
     return parser
 
@@ -271,6 +272,8 @@ def _render(args) -> int:
         if args.time is not None:
             raise ValueError("--time: a render on a cluster takes --spp (its tasks are pass ranges)")
         state = None
+        if args.task_passes is not None and args.task_passes < 1:
+            raise ValueError(f"--task-passes: expected an integer >= 1, got {args.task_passes}")
     elif args.task_passes is not None:
         raise ValueError("--task-passes: only for renders on a cluster (--workers or --scheduler)")
     scene = _load(args)
@@ -431,6 +434,12 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"pathspace {args.command}: interrupted", file=sys.stderr)
         return 128 + signal.SIGINT
+    except Exception as error:  # the Dask cluster's own failures (a worker killed too often, a lost scheduler)
+        if type(error).__module__.split(".")[0] != "distributed":
+            raise
+        print(f"pathspace {args.command}: error: on the Dask cluster: {type(error).__name__}: {error}",
+              file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

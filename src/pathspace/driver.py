@@ -27,6 +27,7 @@ from .estimators.base import Budget, Checkpoint, RenderJob
 from .estimators.control import RenderControl
 from .film import Film
 from .memory import check_render_memory
+from .progress import progress_bar
 from .resume import Autosave, open_state, render_identity
 from .sampler import SamplerSource, StreamSamplers
 from .scene import Scene, load_scene
@@ -237,8 +238,9 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
     previous = state.seconds if state is not None else 0.0
     estimator.prepare(scene)  # build the BVHs it needs before the clock starts
     autosave = Autosave(state_file, identity, save_every) if state_file is not None else None
-    job = RenderJob(scene, mode, samplers or StreamSamplers(seed), film, threads, RenderControl(),
-                    progress=_progress_bar(progress, spp, restored, estimator.name), autosave=autosave)
+    bar = progress_bar(progress, spp, "spp", f"rendering ({estimator.name})", restored)
+    job = RenderJob(scene, mode, samplers or StreamSamplers(seed), film, threads, RenderControl(), progress=bar,
+                    autosave=autosave)
     if spp is not None:  # this session renders the passes after the restored ones
         budget = Budget(spp - restored, None, first_pass + restored, tuple(c - restored for c in checkpoints
                                                                            if c > restored), "spp")
@@ -313,6 +315,9 @@ def _check_distributable(client: Any, estimator: Estimator, spp: int | None, che
     """Refuse a render on a cluster that its tasks could not reproduce, naming the setting."""
     if client is None:
         raise ValueError("task_passes: only for renders on a cluster (give client=)")
+    if not hasattr(client, "submit"):
+        raise ValueError(f"client: expected a dask.distributed.Client (pathspace.cluster.start_client(scheduler="
+                         f"ADDRESS) joins a running cluster), got {client!r}")
     if spp is None:
         raise ValueError("time: a render on a cluster takes spp (its tasks are pass ranges); sweeps and "
                          "convergence runs on a cluster take time budgets per cell")
@@ -340,11 +345,3 @@ def _check_resumable(scene: Scene, estimator: Estimator, samplers: SamplerSource
     if not scene.fingerprint:
         raise ValueError("state_file: the scene has no fingerprint (load it with load_scene or scene_from_dict), "
                          "so a resumed render could not check that it is the same scene")
-
-
-def _progress_bar(enabled: bool, total: int | None, done: int, estimator: str):
-    if not enabled:
-        return None
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, initial=done, unit="spp", desc=f"rendering ({estimator})", dynamic_ncols=True)

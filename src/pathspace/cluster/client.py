@@ -25,8 +25,8 @@ def start_client(workers: int | None = None, scheduler: str | None = None, threa
     process per core, one thread each -- pathspace's tasks scale across processes, not threads; see
     docs/distributed.md).  ``dashboard``: serve Dask's dashboard (``client.dashboard_link``) on a free
     port -- its scheduler-side monitoring costs about 5% of the workers' throughput when the client shares
-    the cores with them (measured on two cores).  ``cluster_options`` go to ``LocalCluster``.  ``client.close()`` (or leaving a
-    ``with`` block) also stops a cluster it started."""
+    the cores with them (measured on two cores).  ``cluster_options`` go to ``LocalCluster``.
+    ``client.close()`` (or leaving a ``with`` block) also stops a cluster it started."""
     distributed = require_distributed()
     import dask
 
@@ -53,17 +53,20 @@ def start_client(workers: int | None = None, scheduler: str | None = None, threa
 def jobqueue_cluster(kind: str, *, cores: int, memory: str, walltime: str, queue: str | None = None,
                      account: str | None = None, processes: int | None = None, **options: Any):
     """A dask-jobqueue cluster of ``kind`` ("slurm", "pbs", "sge", "lsf") whose jobs each run ``processes``
-    single-threaded worker processes (default: one per core) on ``cores`` cores with ``memory``; no job is
-    submitted until it is scaled (``cluster.scale(jobs=n)``)."""
+    single-threaded worker processes (default: one per core) on ``cores`` cores with ``memory``, charged to
+    ``account`` (SGE and LSF call it a project); no job is submitted until it is scaled
+    (``cluster.scale(jobs=n)``).  The workers' profiler is off, as in :func:`start_client`."""
     if kind not in JOBQUEUE_KINDS:
         raise ValueError(f"cluster: expected one of {', '.join(JOBQUEUE_KINDS)}, got {kind!r}")
     jobqueue = optional_import("dask_jobqueue", "clusters on batch queues", extra="dask")
     processes = cores if processes is None else processes
     if not 1 <= processes <= cores:
         raise ValueError(f"processes: expected 1 .. cores ({cores}), got {processes}")
-    extra = {k: v for k, v in (("queue", queue), ("account", account)) if v is not None}
-    import dask
-
-    with dask.config.set(WORKER_CONFIG):
-        return getattr(jobqueue, JOBQUEUE_KINDS[kind])(cores=cores, processes=processes, memory=memory,
-                                                       walltime=walltime, **extra, **options)
+    charge = "account" if kind in ("slurm", "pbs") else "project"
+    extra = {k: v for k, v in (("queue", queue), (charge, account)) if v is not None}
+    # The jobs start their workers on other machines: the setting travels as an environment variable.
+    prologue = [f"export DASK_{key.upper().replace('.', '__').replace('-', '_')}={value}"
+                for key, value in WORKER_CONFIG.items()]
+    return getattr(jobqueue, JOBQUEUE_KINDS[kind])(cores=cores, processes=processes, memory=memory,
+                                                   walltime=walltime, job_script_prologue=prologue, **extra,
+                                                   **options)

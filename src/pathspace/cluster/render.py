@@ -10,11 +10,12 @@ the single-process render's to rounding (Chan's pairwise update against Welford'
 time; a few ulps) and two cluster renders with the same ``task_passes`` are bit for bit equal, on any
 number of workers.
 
-At most ``2 x worker threads`` tasks are outstanding (submitted and not yet merged), so the client holds
-at most that many films waiting for their turn.  A task whose worker dies is run again by Dask on
-another worker (``distributed.scheduler.allowed-failures``, default 3); results are merged by task
-index, once -- a result that arrived twice would be ignored.  A task that raises cancels the render and
-re-raises its error, with a note naming its passes and worker.
+At most ``2 x worker threads`` tasks are outstanding (submitted and not yet merged; workers that join
+during the render widen the window), and the film of a task that finished before the ones ahead of it
+stays on its worker until its turn: the client holds its own film and one task's.  A task whose worker
+dies is run again by Dask on another worker (``distributed.scheduler.allowed-failures``, default 3),
+and each task's future is merged once, by its index.  A task that raises cancels the render and
+re-raises its error, with a note naming its passes.
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from dataclasses import dataclass, field
 
 from ..estimators.base import Counters
 from ..film import Film
+from ..progress import progress_bar
 from .client import require_distributed
 from .scenes import payload_future
 from .tasks import render_passes
@@ -41,8 +43,8 @@ class ClusterRun:
     """What a render on a cluster gives the driver: the merged ``film``, the tasks' summed ``counters``,
     the wall ``seconds`` from the first submission to the last merge, the worker ``threads`` and the
     ``stats`` it adds: ``stats["cluster"]`` = {scheduler, threads, workers_used, tasks, task_passes,
-    task_seconds (their render time, summed), films_waiting_peak (the most task films the client held
-    at once, the one being merged included)}."""
+    task_seconds (their render time, summed), tasks_waiting_peak (the most finished tasks at once whose
+    films waited on the workers for their turn, the next one to merge included)}."""
 
     film: Film
     counters: Counters
@@ -80,17 +82,18 @@ def render_on_cluster(client, scene, estimator, mode, *, spp: int, seed: int, fi
     token = uuid.uuid4().hex[:12]
     film = Film(scene.camera.width, scene.camera.height, covariance=mode.film_covariance, to_srgb=mode.film_to_srgb)
     counters, task_seconds, workers = Counters(), 0.0, set()
-    bar = _progress_bar(progress, spp, estimator.name)
+    bar = progress_bar(progress, spp, "spp", f"rendering on the cluster ({estimator.name})")
     clock = time.perf_counter()
     scene_future = payload_future(client, scene)
     index_of: dict = {}
-    waiting: dict[int, object] = {}          # finished results waiting for the tasks before them
+    waiting: dict[int, object] = {}   # finished tasks waiting for the tasks before them (their films stay on workers)
     merged = submitted = peak = 0
     done = distributed.as_completed(loop=client.loop)
 
     def submit() -> None:
-        nonlocal submitted
-        while submitted < len(starts) and submitted - merged < max(2, 2 * threads):
+        nonlocal submitted, threads
+        threads = max(threads, sum(client.nthreads().values()))  # workers that joined since the start count too
+        while submitted < len(starts) and submitted - merged < 2 * threads:
             start = starts[submitted]
             count = min(task_passes, first_pass + spp - start)
             future = client.submit(render_passes, scene_future, estimator, seed, start, count, spectral,
@@ -99,22 +102,24 @@ def render_on_cluster(client, scene, estimator, mode, *, spp: int, seed: int, fi
             done.add(future)
             submitted += 1
 
+    def result_of(index: int):
+        try:
+            return waiting.pop(index).result()
+        except Exception as error:
+            last = min(starts[index] + task_passes, first_pass + spp) - 1
+            error.add_note(f"in the cluster task of passes {starts[index]} .. {last}")
+            raise
+
     try:
         submit()
-        for future in done:
+        for future in done:  # each task's future once, when it has finished (after any retries)
             index = index_of[future.key]
-            if index < merged or index in waiting:
-                continue  # merged once already
-            try:
-                waiting[index] = future.result()
-                peak = max(peak, len(waiting))
-            except Exception as error:
-                last = min(starts[index] + task_passes, first_pass + spp) - 1
-                error.add_note(f"in the cluster task of passes {starts[index]} .. {last}")
-                raise
-            future.release()
-            while merged in waiting:
-                result = waiting.pop(merged)
+            waiting[index] = future
+            peak = max(peak, len(waiting))
+            if future.status == "error":
+                result_of(index)
+            while merged in waiting:  # its film is fetched only now: the client holds one task film at a time
+                result = result_of(merged)
                 film.merge(result.film)
                 counters.merge(result.counters)
                 task_seconds += result.seconds
@@ -125,21 +130,14 @@ def render_on_cluster(client, scene, estimator, mode, *, spp: int, seed: int, fi
                     bar.set_postfix_str(f"{merged}/{len(starts)} tasks")
             submit()
     finally:
-        for future in list(done.futures):  # still outstanding when the render stops early
-            future.cancel()
+        outstanding = list(done.futures)  # not finished: the render stopped early
+        if outstanding:
+            client.cancel(outstanding)
         scene_future.release()
         if bar is not None:
             bar.close()
     seconds = time.perf_counter() - clock
     stats = {"cluster": {"scheduler": client.scheduler.address, "threads": threads, "workers_used": len(workers),
                          "tasks": len(starts), "task_passes": task_passes, "task_seconds": task_seconds,
-                         "films_waiting_peak": peak}}
+                         "tasks_waiting_peak": peak}}
     return ClusterRun(film, counters, seconds, threads, stats)
-
-
-def _progress_bar(enabled: bool, total: int, estimator: str):
-    if not enabled:
-        return None
-    from tqdm.auto import tqdm
-
-    return tqdm(total=total, unit="spp", desc=f"rendering on the cluster ({estimator})", dynamic_ncols=True)

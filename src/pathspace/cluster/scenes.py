@@ -3,9 +3,7 @@
 A task gets a :class:`ScenePayload` (a key and the pickled scene: geometry, materials, lights and
 camera, without BVHs; see :meth:`pathspace.scene.Scene.__getstate__`) and calls :func:`scene_on_worker`,
 which returns the scene of that key from the process's cache or unpickles it there.  The payload
-reaches a worker once: the client submits it as the result of one task that the render tasks depend on
-(:func:`payload_future`), so Dask moves it to each worker that runs them and can recompute it if a
-worker holding it dies.
+is scattered to every worker once per render or sweep (:func:`payload_future`).
 """
 from __future__ import annotations
 
@@ -42,23 +40,17 @@ class ScenePayload:
 
 
 def payload_future(client, scene):
-    """A future of ``scene``'s payload on ``client``'s cluster, to pass to tasks (one transfer per worker)."""
-    payload = ScenePayload.of(scene)
-    return ship(client, payload, f"pathspace-scene-{payload.key[:32]}")
+    """A future of ``scene``'s payload on ``client``'s cluster, to pass to tasks (see :func:`ship`)."""
+    return ship(client, ScenePayload.of(scene))
 
 
-def ship(client, value, key: str):
-    """A future of ``value`` under ``key`` for tasks to depend on, held by every worker: it is a task's
-    result (so Dask can compute it again if every holder dies) copied to all workers before any task
-    needs it (else Dask would keep the tasks near the one worker holding it: measured 5 tasks to 3 on
-    two workers, and a second worker waiting 0.2 s for its copy)."""
-    future = client.submit(_identity, value, key=key, pure=False)
-    client.replicate([future])
-    return future
-
-
-def _identity(value):
-    return value
+def ship(client, value):
+    """A future of ``value`` copied to every worker (``scatter(broadcast=True)``), for tasks to depend on: it
+    travels straight to the workers, not through the scheduler's task graph, and every worker holds it
+    before any task needs it -- else Dask keeps the tasks near the one worker that holds it (measured: 5
+    tasks to 3 on two workers, the second waiting 0.2 s for its copy).  A worker that joins later, or
+    restarts, fetches it from another; if every worker holding it dies at once, the tasks fail."""
+    return client.scatter([value], broadcast=True, hash=False)[0]  # in a list: lists and dicts are one value too
 
 
 def scene_on_worker(payload: ScenePayload):

@@ -6,7 +6,6 @@ a film (renders), an image with its variance and statistics (sweep cells), or ta
 """
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -21,25 +20,23 @@ __all__ = ["PassesResult", "CellResult", "render_passes", "render_cell", "conver
 
 @dataclass
 class PassesResult:
-    """The passes of one render task: their ``film``, what the render counted, its render ``seconds``, the
-    task's wall ``elapsed`` time on the worker (scene lookup and result included) and the ``worker``."""
+    """The passes of one render task: their ``film``, what the render counted, its render ``seconds`` and the
+    ``worker`` that rendered them."""
 
     film: Film
     counters: Counters
     seconds: float
-    elapsed: float
     worker: str
 
 
 @dataclass
 class CellResult:
     """One render of a sweep cell: what :func:`pathspace.experiment.sweep` tabulates (``image``,
-    ``variance``, ``stats``), with the ``worker`` it ran on."""
+    ``variance``, ``stats``)."""
 
     image: np.ndarray
     variance: np.ndarray
     stats: dict
-    worker: str
 
 
 def _worker_name() -> str:
@@ -56,14 +53,13 @@ def render_passes(payload: ScenePayload, estimator, seed: int, first_pass: int, 
     """Passes ``first_pass`` .. ``first_pass + spp - 1`` of the render with ``seed``, on one thread."""
     from ..driver import render
 
-    start = time.perf_counter()
     scene = scene_on_worker(payload)
     result = render(scene, estimator, spp=spp, seed=seed, first_pass=first_pass, threads=1, spectral=spectral,
                     wavelength_sampling=wavelength_sampling)
     s = result.stats
     counters = Counters(rays=s["rays"], truncated=s["truncated"], longest=s["longest_subpath"],
                         nonfinite_contributions=s["nonfinite_contributions"])
-    return PassesResult(result.film, counters, s["seconds"], time.perf_counter() - start, _worker_name())
+    return PassesResult(result.film, counters, s["seconds"], _worker_name())
 
 
 def render_cell(payload: ScenePayload, estimator, seed: int, spp: int | None, seconds: float | None) -> CellResult:
@@ -72,7 +68,7 @@ def render_cell(payload: ScenePayload, estimator, seed: int, spp: int | None, se
 
     result = render(scene_on_worker(payload), estimator, spp=spp, time=seconds, seed=seed, threads=1)
     stats = {k: v for k, v in result.stats.items() if k != "plan"}
-    return CellResult(result.image, result.variance, stats, _worker_name())
+    return CellResult(result.image, result.variance, stats)
 
 
 def converge_run(payload: ScenePayload, spec, seed: int, reference: np.ndarray, spp: int | None,

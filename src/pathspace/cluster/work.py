@@ -5,6 +5,7 @@ import os
 import uuid
 from typing import Any, Callable, Iterator
 
+from ..progress import progress_bar
 from .client import require_distributed
 from .scenes import payload_future, ship
 
@@ -24,16 +25,11 @@ def run_tasks(client, scene, function: Callable, tasks: list[dict], *, shared: d
         scene = load_scene(scene)
     token = uuid.uuid4().hex[:12]
     scene_future = payload_future(client, scene)
-    shared_futures = {name: ship(client, value, f"pathspace-shared-{token}-{name}")
-                      for name, value in (shared or {}).items()}
+    shared_futures = {name: ship(client, value) for name, value in (shared or {}).items()}
     futures = [client.submit(function, scene_future, **shared_futures, **task, key=f"pathspace-{unit}-{token}-{i}",
                              pure=False) for i, task in enumerate(tasks)]
     index_of = {future.key: i for i, future in enumerate(futures)}
-    bar = None
-    if progress:
-        from tqdm.auto import tqdm
-
-        bar = tqdm(total=len(tasks), unit=unit, desc=f"{unit}s on the cluster", dynamic_ncols=True)
+    bar = progress_bar(progress, len(tasks), unit, f"{unit}s on the cluster")
     try:
         for future in distributed.as_completed(futures, loop=client.loop):
             try:
@@ -45,8 +41,9 @@ def run_tasks(client, scene, function: Callable, tasks: list[dict], *, shared: d
                 bar.update(1)
             yield index_of[future.key], output
     finally:
-        for future in futures:
-            future.cancel()
+        outstanding = [future for future in futures if not future.done()]
+        if outstanding:  # the caller stopped early
+            client.cancel(outstanding)
         for future in (scene_future, *shared_futures.values()):
             future.release()
         if bar is not None:

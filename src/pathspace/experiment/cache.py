@@ -1,9 +1,9 @@
 """Finished sweep renders, cached so that a sweep run again renders only what it is missing.
 
 A cell's render (one setting, one seed) is stored under the key of everything it depends on -- the
-scene's fingerprint, the estimator and all its parameters, the seed, the budget and the code that
-rendered it (a hash of pathspace's source files and its C extension, so that a changed estimator is
-never served an old image) -- as one ``.npz`` file (image, variance, statistics) in
+scene's fingerprint, the estimator and all its parameters, the seed, the budget, the threads it
+rendered on and the code that rendered it (a hash of pathspace's source files and its C extension,
+so that a changed estimator is never served an old image) -- as one ``.npz`` file (image, variance, statistics) in
 ``$PATHSPACE_CACHE/sweeps`` (default ``~/.cache/pathspace/sweeps``), written atomically as each render
 finishes: a sweep that stops (the client lost its connection, the machine went down) loses only the
 renders in flight.
@@ -13,6 +13,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import warnings
+import zipfile
 from functools import lru_cache
 from pathlib import Path
 from typing import Any
@@ -57,12 +59,14 @@ class CellCache:
         raise ValueError(f"cache: expected a folder, True, False or None, got {cache!r}")
 
     @staticmethod
-    def key(scene, estimator, seed: int, spp: int | None, seconds: float | None) -> str | None:
-        """The key of a render, or None for a scene without a fingerprint (built by hand: not cached)."""
+    def key(scene, estimator, seed: int, spp: int | None, seconds: float | None, threads: int) -> str | None:
+        """The key of a render on ``threads`` threads (its seconds, and with a time budget its image, depend
+        on them), or None for a scene without a fingerprint (built by hand: not cached)."""
         if not scene.fingerprint:
             return None
         return cache_key({"scene": scene.fingerprint, "estimator": estimator.name, "params": estimator.params,
-                          "seed": int(seed), "spp": spp, "time": seconds, "code": code_fingerprint()})
+                          "seed": int(seed), "spp": spp, "time": seconds, "threads": int(threads),
+                          "code": code_fingerprint()})
 
     def path(self, key: str) -> Path:
         return self.folder / f"{key}.npz"
@@ -75,15 +79,18 @@ class CellCache:
             return None
         try:
             with np.load(self.path(key)) as data:
-                return CellResult(data["image"], data["variance"], json.loads(str(data["stats"])), "cache")
-        except (OSError, ValueError, KeyError):  # a damaged entry is rendered again
+                return CellResult(data["image"], data["variance"], json.loads(str(data["stats"])))
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):  # a damaged entry: rendered again
             return None
 
     def put(self, key: str | None, result) -> None:
-        """Store a finished render (``image``, ``variance``, ``stats``)."""
+        """Store a finished render (``image``, ``variance``, ``stats``); a failure to write (a full disk) is
+        a warning, not the end of the sweep."""
         if key is None:
             return
-        with atomic_output(self.path(key)) as temporary:
-            with open(temporary, "wb") as file:
+        try:
+            with atomic_output(self.path(key)) as temporary, open(temporary, "wb") as file:
                 np.savez(file, image=result.image, variance=result.variance,
                          stats=np.array(json.dumps(result.stats, default=str)))
+        except OSError as error:
+            warnings.warn(f"sweep cache: could not store a finished render in {self.folder}: {error}", stacklevel=2)

@@ -126,7 +126,8 @@ def converge(scene, estimators: Sequence[Any], reference: Any, *, time: float | 
     (default: log-spaced) and at the end, and compare each snapshot with ``reference``.
 
     ``client``: a ``dask.distributed.Client``; every run (estimator and seed) is then a task rendering on
-    one worker thread, and the runs go on side by side (see :mod:`pathspace.cluster`)."""
+    one worker thread, and the runs go on side by side (see :mod:`pathspace.cluster`).  A run that raises
+    stops the study (its error names the run); runs are not cached (sweeps' renders are)."""
     pd = pandas()
     if (time is None) == (spp is None):
         raise ValueError("give either time (seconds) or spp")
@@ -151,6 +152,8 @@ def converge(scene, estimators: Sequence[Any], reference: Any, *, time: float | 
                                                    metrics=tuple(metrics), keep_images=keep_images),
                                        progress=progress, unit="run"):
             if isinstance(output, BaseException):
+                spec, seed = runs[index]
+                output.add_note(f"in the convergence run of {spec.label}, seed {seed}, on the cluster")
                 raise output
             outputs[index] = output
     else:

@@ -39,6 +39,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 import numpy as np
 
+from .._native import default_thread_count
 from ..metrics import METRICS
 from ..scene import load_scene
 from ..validate import compare_estimates
@@ -93,6 +94,9 @@ def sweep(scene, estimator: Any, grid: dict[str, Sequence[Any]], reference: Any,
         raise ValueError("give either time (seconds) or spp")
     if client is not None and threads is not None:
         raise ValueError("threads: cells on a cluster render on one worker thread each")
+    seeds = list(seeds)
+    if len(set(seeds)) != len(seeds):
+        raise ValueError(f"seeds: expected distinct seeds, got {list(seeds)}")
     spec = EstimatorSpec.parse(estimator)
     ref, ref_variance = reference_image(reference)
     if ref_variance is None:
@@ -103,7 +107,9 @@ def sweep(scene, estimator: Any, grid: dict[str, Sequence[Any]], reference: Any,
         scene = load_scene(scene)
     store = CellCache.choose(cache, client is not None)
     jobs = [(c, seed) for c in range(len(cells)) for seed in seeds]
-    keys = {job: store.key(scene, estimators[job[0]], job[1], spp, time) for job in jobs} if store else {}
+    render_threads = 1 if client is not None else (default_thread_count() if threads is None else threads)
+    keys = ({job: store.key(scene, estimators[job[0]], job[1], spp, time, render_threads) for job in jobs}
+            if store else {})
     outcomes, job_rows, summaries = {}, {}, {}
 
     def finished(job: tuple[int, int], outcome) -> None:
@@ -158,6 +164,8 @@ def _renders(scene, estimators: list, jobs: list[tuple[int, int]], spp: int | No
              threads: int | None, progress: bool, client: Any) -> Iterator[tuple[tuple[int, int], Any]]:
     """((cell, seed), render or the exception it raised) for every job, as each finishes: in this process,
     one after the other, or as tasks on ``client``'s cluster."""
+    if not jobs:
+        return
     if client is not None:
         from ..cluster.tasks import render_cell
         from ..cluster.work import run_tasks
