@@ -32,6 +32,8 @@ from .tasks import render_passes
 
 __all__ = ["ClusterRun", "render_on_cluster", "default_task_passes", "TASKS_PER_THREAD"]
 
+# How often a render asks the scheduler for the workers' threads (each question is a round trip).
+WORKER_RECOUNT_SECONDS = 1.0
 # Tasks per worker thread when task_passes is not given: enough that an uneven last round costs little
 # (two workers, 64 spp at 256x256: 1.74-1.78x one worker's rate with 4, 1.87-1.90x with 8 per thread,
 # the overhead of a task being about 6 ms).
@@ -88,11 +90,13 @@ def render_on_cluster(client, scene, estimator, mode, *, spp: int, seed: int, fi
     index_of: dict = {}
     waiting: dict[int, object] = {}   # finished tasks waiting for the tasks before them (their films stay on workers)
     merged = submitted = peak = 0
+    counted = time.perf_counter()
     done = distributed.as_completed(loop=client.loop)
 
     def submit() -> None:
-        nonlocal submitted, threads
-        threads = max(threads, sum(client.nthreads().values()))  # workers that joined since the start count too
+        nonlocal submitted, threads, counted
+        if time.perf_counter() - counted > WORKER_RECOUNT_SECONDS:  # workers that joined since the start count too
+            threads, counted = max(threads, sum(client.nthreads().values())), time.perf_counter()
         while submitted < len(starts) and submitted - merged < 2 * threads:
             start = starts[submitted]
             count = min(task_passes, first_pass + spp - start)
