@@ -168,14 +168,15 @@ def test_state_files_on_the_command_line(tmp_path, capsys):
     assert read_exr(out)[2]["spp"] == 2 and not (tmp_path / "out.exr.state").exists()
 
     state = tmp_path / "out.exr.state"
-    stopped = ps.render(ps.load_scene(scene), "pt", spp=300, seed=0, max_depth=3, state_file=state,
+    # 3000 passes of 256 pixels: many work items, so the render cannot end before the SIGINT is handled.
+    stopped = ps.render(ps.load_scene(scene), "pt", spp=3000, seed=0, max_depth=3, state_file=state,
                         stop_on_signal=True, checkpoints=[2],
                         on_checkpoint=lambda c: os.kill(os.getpid(), signal.SIGINT))
     assert stopped.stats["stopped"] == "SIGINT"
-    done = run_main(capsys, "render", scene, "--spp", 300, "-p", "max_depth=3", "-o", out)
-    one_line_error(done, "render", f"{state} holds an unfinished render ({stopped.stats['spp']} of 300 spp",
+    done = run_main(capsys, "render", scene, "--spp", 3000, "-p", "max_depth=3", "-o", out)
+    one_line_error(done, "render", f"{state} holds an unfinished render ({stopped.stats['spp']} of 3000 spp",
                    "--resume")
-    done = run_main(capsys, "render", scene, "--spp", 300, "-p", "max_depth=4", "--seed", 1, "-o", out, "--resume")
+    done = run_main(capsys, "render", scene, "--spp", 3000, "-p", "max_depth=4", "--seed", 1, "-o", out, "--resume")
     one_line_error(done, "render", "was saved by a different render (params.max_depth: 3 in the state, 4 now; "
                                    "seed: 0 in the state, 1 now)")
     assert read_exr(out)[2]["spp"] == 2  # the earlier image is untouched

@@ -1,4 +1,4 @@
-"""Every notebook in notebooks/ runs top to bottom (with small budgets: PATHSPACE_NOTEBOOK_SCALE=0.05)."""
+"""Every notebook in notebooks/ runs top to bottom (with small budgets: PATHSPACE_NOTEBOOK_SCALE=0.02)."""
 from __future__ import annotations
 
 import nbformat
@@ -17,7 +17,7 @@ def test_there_are_notebooks():
 
 @pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
 def test_notebook_runs(path, tmp_path, monkeypatch):
-    monkeypatch.setenv("PATHSPACE_NOTEBOOK_SCALE", "0.05")
+    monkeypatch.setenv("PATHSPACE_NOTEBOOK_SCALE", "0.02")
     monkeypatch.setenv("PATHSPACE_CACHE", str(tmp_path))  # references of this run only
     monkeypatch.setenv("MPLBACKEND", "Agg")
     notebook = nbformat.read(path, as_version=4)

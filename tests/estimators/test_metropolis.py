@@ -123,8 +123,9 @@ def light_share(image: np.ndarray, light: np.ndarray) -> float:
     return float(y[light].sum() / y.sum())
 
 
-@pytest.mark.parametrize("label,estimator,params", [VARIANTS[0], VARIANTS[2], ("mlt", "mlt", {"direct": 0})],
-                         ids=["pssmlt-pt", "mmlt", "mlt"])
+@pytest.mark.parametrize("label,estimator,params",
+                         [VARIANTS[0], VARIANTS[2], pytest.param("mlt", "mlt", {"direct": 0}, marks=pytest.mark.slow)],
+                         ids=["pssmlt-pt", "mmlt", "mlt"])  # path-space MLT's run takes a minute: slow
 def test_brightness_and_light_share_do_not_drift_with_the_bootstrap_size(label, estimator, params):
     """Small and large bootstraps: every seed's brightness agrees with BDPT's within its stated error, and the
     light's share of the energy is the same (Welch's t-test over seeds, and within 1% beyond 3 standard

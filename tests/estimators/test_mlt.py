@@ -93,7 +93,10 @@ def test_paths_know_their_densities():
     assert (values.rev[live, 1] > 0).all() and (values.fwd[live, 0] > 0).all()
 
 
-@pytest.mark.parametrize("label,params", [MIXTURES[0], MIXTURES[1], MIXTURES[4]], ids=["bidirectional", "lens", "mixture"])
+# The mixture of every mutation by default; each mutation alone on both boxes in the slow test below.
+@pytest.mark.parametrize("label,params", [pytest.param(*MIXTURES[0], marks=pytest.mark.slow),
+                                          pytest.param(*MIXTURES[1], marks=pytest.mark.slow), MIXTURES[4]],
+                         ids=["bidirectional", "lens", "mixture"])
 def test_mlt_agrees_with_bdpt_on_the_cornell_box(label, params):
     results = mlt_renders("cornell-box", params, 6)
     check_mlt_agreement(results, reference("cornell-box"))
