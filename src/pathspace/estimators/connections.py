@@ -298,12 +298,12 @@ def joins(batch: Batch):
     y_start = np.concatenate([[0], np.cumsum(ny)[:-1]])
     z_start = np.concatenate([[0], np.cumsum(nz)[:-1]])
     pair_start = np.concatenate([[0], np.cumsum(pairs)])
+    lane_of_pair = np.repeat(np.arange(lanes), pairs)
     for first, last in zip(batch.units[:-1], batch.units[1:]):
         for begin in range(int(pair_start[first]), int(pair_start[last]), CHUNK):
-            k = np.arange(begin, min(begin + CHUNK, int(pair_start[last])))
-            lane = np.searchsorted(pair_start[:-1], k, side="right") - 1
-            # Lanes without pairs share their start with the next lane; searchsorted picks the last of them.
-            local = k - pair_start.take(lane)
+            end = min(begin + CHUNK, int(pair_start[last]))
+            lane = lane_of_pair[begin:end]
+            local = np.arange(begin, end) - pair_start.take(lane)
             y = cy.take(y_start.take(lane) + local // nz.take(lane))
             z = cz.take(z_start.take(lane) + local % nz.take(lane))
             s, t = light.index.take(y) + 1, eye.index.take(z) + 1
