@@ -161,7 +161,7 @@ class Bidirectional(Estimator):
             if mine.size < part.count:
                 on = np.flatnonzero(splat)
                 result.splats.append(Splats(lane_pass.take(part.lane[on]), pixel[on],
-                                            mode.to_film(weighted[:, on], state, part.lane[on])))
+                                            mode.to_film(np.take(weighted, on, axis=1), state, part.lane[on])))
             if self.pyramid:
                 self._record_strategies(result.layers, part, weighted, pixel, mode, state, lane_pass)
         counters.rays += batch.rays

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..bsdfs import MaterialLanes, Surface
 from ..mis import LIGHT_DELTA, Connections
-from ..vecmath import dot
+from ..vecmath import columns, dot
 from .subpaths import LIGHT, SURFACE, LensHits, Subpaths, Vertices, cos_at, reverse_pdf, to_area
 from .visibility import light_sample_blocked, segment_blocked
 
@@ -136,7 +136,7 @@ def emitter_hits(batch: Batch) -> Contributions | None:
 def _kept(batch: Batch, vertices: Vertices, value: np.ndarray) -> tuple[Vertices, np.ndarray]:
     """The vertices and values (C, n) of the useful contributions (see :meth:`Batch.useful`)."""
     keep = batch.useful(value)
-    return vertices.keep(keep), value[:, keep]
+    return vertices.keep(keep), columns(value, keep)
 
 
 # -- s = 1 -----------------------------------------------------------------------------------------
@@ -160,8 +160,8 @@ def light_samples(batch: Batch) -> Contributions | None:
     useful = useful[~light_sample_blocked(scene, z.p, z.eps, z.n, ls, useful)]
     if not useful.size:
         return None
-    z, value, pdf_bsdf = z.keep(useful), value[:, useful], pdf_bsdf[useful]
-    wi, entity, normal = ls.wi[:, useful], ls.entity[useful], ls.normal[:, useful]
+    z, value, pdf_bsdf = z.keep(useful), columns(value, useful), pdf_bsdf[useful]
+    wi, entity, normal = columns(ls.wi, useful), ls.entity[useful], columns(ls.normal, useful)
     distance = ls.distance[useful].astype(np.float64)
     infinite = ~np.isfinite(distance)
     dist2 = np.where(infinite, 1.0, distance * distance)
@@ -205,9 +205,9 @@ def lens_samples(batch: Batch) -> Contributions | None:
         return None
     if not batch.densities:
         lane = y.lane.take(useful)
-        return Contributions.make(lane, y.index.take(useful) + 1, 1, value[:, useful], raster=raster[:, useful],
-                                  flags=batch.lane_flags.take(lane))
-    y, value, wi, lens = y.keep(useful), value[:, useful], wi[:, useful], lens[:, useful]
+        return Contributions.make(lane, y.index.take(useful) + 1, 1, columns(value, useful),
+                                  raster=columns(raster, useful), flags=batch.lane_flags.take(lane))
+    y, value, wi, lens = y.keep(useful), columns(value, useful), columns(wi, useful), columns(lens, useful)
     pdf_fwd, pdf_back, we = pdf_fwd[useful], pdf_back[useful], we[useful]
     d = lens - y.p
     dist2 = dot(d, d)
@@ -219,7 +219,7 @@ def lens_samples(batch: Batch) -> Contributions | None:
     qs_rev = to_area(we * camera.lens_area * np.abs(camera.cos_to_axis(-wi)), y.n, wi, dist2)
     # y_{s-2} as the camera walk would go on to it (nothing for s = 1: pdf_back and g_prev are 0 there).
     qs_minus_rev = _at_previous(pdf_back * y.q_rev, y)
-    return Contributions.make(y.lane, y.index + 1, 1, value, raster=raster[:, useful], qs_fwd=y.fwd, qs_rev=qs_rev,
+    return Contributions.make(y.lane, y.index + 1, 1, value, raster=columns(raster, useful), qs_fwd=y.fwd, qs_rev=qs_rev,
                               qs_minus_rev=qs_minus_rev, pt_fwd=np.full(y.size, 1.0 / camera.lens_area),
                               pt_rev=pt_rev, flags=batch.lane_flags.take(y.lane))
 
@@ -256,15 +256,16 @@ def lens_hits(batch: Batch) -> Contributions | None:
     # A point or spot light seen directly through the lens is not drawn (see lens_samples).
     direct_delta = (hits.index == 1) & (batch.lane_flags.take(hits.lane) & LIGHT_DELTA).astype(bool)
     keep = np.flatnonzero((hits.index <= batch.max_depth) & ~direct_delta & batch.wanted(hits.lane, hits.index + 1, 0))
-    lane, index, point, d = hits.lane[keep], hits.index[keep], hits.point[:, keep], hits.direction[:, keep]
+    lane, index, point, d = hits.lane[keep], hits.index[keep], columns(hits.point, keep), columns(hits.direction, keep)
     leaving = -d.astype(np.float64)
     raster, inside = camera.raster(point + leaving, point)
-    value = np.where(inside, hits.beta[:, keep] * camera.importance(leaving, point), 0.0)
+    value = np.where(inside, columns(hits.beta, keep) * camera.importance(leaving, point), 0.0)
     useful = batch.useful(value)
     if not useful.size:
         return None
-    lane, index, point, leaving, value, raster = (lane[useful], index[useful], point[:, useful], leaving[:, useful],
-                                                  value[:, useful], raster[:, useful])
+    lane, index, point, leaving, value, raster = (lane[useful], index[useful], columns(point, useful),
+                                                  columns(leaving, useful), columns(value, useful),
+                                                  columns(raster, useful))
     pdf, distance = hits.pdf[keep][useful], hits.distance[keep][useful].astype(np.float64)
     y = light.at(light.offset.take(lane) + index - 1)  # the last light vertex before the lens
     cos_lens = np.abs(camera.cos_to_axis(leaving))
@@ -353,7 +354,7 @@ def _join(batch: Batch, y: Vertices, z: Vertices) -> Contributions | None:
     useful = useful[~blocked]
     if not useful.size:
         return None
-    y, z, value, w, dist2 = y.keep(useful), z.keep(useful), value[:, useful], w[:, useful], dist2[useful]
+    y, z, value, w, dist2 = y.keep(useful), z.keep(useful), columns(value, useful), columns(w, useful), dist2[useful]
     pdf_y, pdf_z = pdf_y[useful], pdf_z[useful]
     return Contributions.make(
         y.lane, y.index + 1, z.index + 1, value,

@@ -369,7 +369,8 @@ class PathTracer(Estimator):
             subset = MaterialLanes(scene.materials, arrival.material.take(todo), colours.take(todo),
                                    {"diffuse_sampling": self.diffuse_sampling})
             lanes.radiance[:, todo] += self._next_event(scene, subset, arrival.keep(todo),
-                                                        np.take(lanes.beta, todo, axis=1), u[:, todo], colours.take(todo))
+                                                        np.take(lanes.beta, todo, axis=1), np.take(u, todo, axis=1),
+                                                        colours.take(todo))
             walk.rays += todo.size
 
     def _next_event(self, scene, materials, arrival: Arrival, beta, u, colours) -> np.ndarray:

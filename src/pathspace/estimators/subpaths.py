@@ -147,9 +147,10 @@ class Vertices:
     """Vertices ``v`` of a :class:`Subpaths`: every per-vertex field (``p``, ``beta``, ``fwd``, ...) is gathered
     at ``v`` on first use; ``keep`` narrows the view."""
 
-    def __init__(self, subpaths: Subpaths, v: np.ndarray) -> None:
+    def __init__(self, subpaths: Subpaths, v: np.ndarray, parent: tuple["Vertices", np.ndarray] | None = None) -> None:
         self.subpaths = subpaths
         self.v = v
+        self.parent = parent   # (view, positions in it) this view was kept from
 
     @property
     def size(self) -> int:
@@ -159,17 +160,18 @@ class Vertices:
     def __getattr__(self, name: str) -> np.ndarray:
         if name not in FIELDS:
             raise AttributeError(name)
-        value = np.take(getattr(self.subpaths, name), self.v, axis=-1)
+        parent = self.parent
+        if parent is not None and name in parent[0].__dict__:
+            value = np.take(parent[0].__dict__[name], parent[1], axis=-1)
+        else:
+            value = np.take(getattr(self.subpaths, name), self.v, axis=-1)
         self.__dict__[name] = value
         return value
 
     def keep(self, k: np.ndarray) -> "Vertices":
-        """The vertices at positions ``k`` of this view (fields already gathered come along)."""
-        view = Vertices(self.subpaths, self.v.take(k))
-        for name in FIELDS:
-            if name in self.__dict__:
-                view.__dict__[name] = np.take(self.__dict__[name], k, axis=-1)
-        return view
+        """The vertices at positions ``k`` of this view.  Fields are gathered when used, from this view's if it
+        has gathered them: a field used only before the narrowing is never gathered again."""
+        return Vertices(self.subpaths, self.v.take(k), (self, k))
 
 
 @dataclass
