@@ -1,0 +1,30 @@
+"""Views of subpath vertices: what connections gather is the vertices' own data, however a view was narrowed."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+
+from pathspace.estimators.subpaths import FIELDS, Vertices
+from pathspace.vecmath import columns
+
+
+def test_narrowed_views_gather_the_vertices_own_fields():
+    rng = np.random.default_rng(0)
+    count = 50
+    fields = {name: rng.random((3, count)) if name in ("p", "n", "beta") else rng.random(count) for name in FIELDS}
+    view = Vertices(SimpleNamespace(**fields), rng.permutation(count)[:30])
+    gathered = view.p.copy(), view.fwd.copy()   # gathered by the wide view: the narrowed views take from them
+    first, second = np.array([3, 0, 7, 29, 11]), np.array([4, 1, 2])
+    once = view.keep(first)
+    np.testing.assert_array_equal(once.p, gathered[0][:, first])
+    twice = once.keep(second)
+    vertices = view.v[first][second]
+    for name in ("p", "fwd", "n", "q"):     # n and q were never gathered by the wider views
+        np.testing.assert_array_equal(getattr(twice, name), np.take(fields[name], vertices, axis=-1))
+    assert twice.size == 3 and "beta" not in twice.__dict__ and "n" not in view.__dict__
+
+def test_columns_is_column_indexing():
+    a = np.arange(24.0).reshape(3, 8)
+    idx = np.array([5, 0, 0, 7])
+    np.testing.assert_array_equal(columns(a, idx), a[:, idx])
