@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["dot", "columns", "orthonormal_basis", "Frame", "gamma", "offset_origin", "shadow_ray", "FLOAT32_ROUNDOFF", "RAY_TMIN"]
+__all__ = ["dot", "columns", "orthonormal_basis", "Frame", "gamma", "offset_origin", "shadow_ray", "FLOAT32_ROUNDOFF",
+           "RAY_TMIN"]
 
 
 def dot(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -219,8 +219,8 @@ def lens_samples(batch: Batch) -> Contributions | None:
     qs_rev = to_area(we * camera.lens_area * np.abs(camera.cos_to_axis(-wi)), y.n, wi, dist2)
     # y_{s-2} as the camera walk would go on to it (nothing for s = 1: pdf_back and g_prev are 0 there).
     qs_minus_rev = _at_previous(pdf_back * y.q_rev, y)
-    return Contributions.make(y.lane, y.index + 1, 1, value, raster=columns(raster, useful), qs_fwd=y.fwd, qs_rev=qs_rev,
-                              qs_minus_rev=qs_minus_rev, pt_fwd=np.full(y.size, 1.0 / camera.lens_area),
+    return Contributions.make(y.lane, y.index + 1, 1, value, raster=columns(raster, useful), qs_fwd=y.fwd,
+                              qs_rev=qs_rev, qs_minus_rev=qs_minus_rev, pt_fwd=np.full(y.size, 1.0 / camera.lens_area),
                               pt_rev=pt_rev, flags=batch.lane_flags.take(y.lane))
 
 
