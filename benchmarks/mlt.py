@@ -70,6 +70,9 @@ def mutation_rate(threads: int, seconds: float) -> None:
         estimator, params = ESTIMATORS[name]
         result = ps.render(scene, estimator, time=seconds, seed=1, max_depth=16, threads=threads, **params)
         m = result.stats["metropolis"]
+        if "mutations_per_second" not in m:   # the bootstrap and the first pass took longer than the budget
+            print(f"  {name:12s} no pass completed in {seconds:g} s: give a longer --time")
+            continue
         print(f"  {name:12s} {m['mutations_per_second'] / 1e3:8.1f} k mutations/s = "
               f"{m['mutations_per_second'] / rate:.2f} x BDPT's samples/s")
 
