@@ -193,7 +193,8 @@ class ChainStates:
         return self.current.shape[0]
 
     def _grow(self, width: int) -> None:
-        extra = max(width - self.width, 16)
+        # At least double: a walk draws its numbers a few at a time, and each growth copies every number.
+        extra = max(width - self.width, self.width, 16)
         self.current = np.concatenate([self.current, np.zeros((extra, self.chains))])
         self.stamp = np.concatenate([self.stamp, np.full((extra, self.chains), -1, np.int64)])
         self.proposal = np.concatenate([self.proposal, np.full((extra, self.chains), np.nan)])
@@ -259,18 +260,23 @@ class ChainStates:
             self._grow(numbers.shape[1])
         width = numbers.shape[1]
         drawn = ~np.isnan(numbers.T)
-        self.current[:, rows] = 0.0
-        self.current[:width, rows] = np.where(drawn, numbers.T, 0.0)
-        self.stamp[:, rows] = -1
-        self.stamp[:width, rows] = np.where(drawn, 0, -1)
-        self.proposal[:, rows] = np.nan
+        # Flat indices of every number of the chains, number by number: the first width x k are those given.
+        # (put on flat indices: several times faster than assigning a[:, rows] of a 2-D array.)
+        cells = (np.arange(self.width)[:, None] * self.chains + rows).reshape(-1)
+        given = cells[:width * rows.size]
+        current, stamp = self.current.reshape(-1), self.stamp.reshape(-1)
+        current.put(cells, 0.0)
+        current.put(given, np.where(drawn, numbers.T, 0.0))
+        stamp.put(cells, -1)
+        stamp.put(given, np.where(drawn, 0, -1))
+        self.proposal.reshape(-1).put(cells, np.nan)
         for name in ("accepted", "last_large"):
             self.counters[name][rows] = 0
 
     def numbers(self, rows: np.ndarray, proposal: bool = False) -> np.ndarray:
         """(k, width) numbers of chains ``rows``: their current state (as last brought up to date), or the
         proposal's (NaN where it has drawn nothing)."""
-        return (self.proposal if proposal else self.current)[:, rows].T
+        return np.take(self.proposal if proposal else self.current, rows, axis=1).T
 
     def set_proposal(self, column: int, values: np.ndarray) -> None:
         """Set number ``column`` of every chain's proposal (e.g. film positions chosen by the bootstrap)."""
