@@ -6,7 +6,6 @@ from types import SimpleNamespace
 import numpy as np
 
 from pathspace.estimators.subpaths import FIELDS, Vertices
-from pathspace.vecmath import columns
 
 
 def test_narrowed_views_gather_the_vertices_own_fields():
@@ -23,8 +22,3 @@ def test_narrowed_views_gather_the_vertices_own_fields():
     for name in ("p", "fwd", "n", "q"):     # n and q were never gathered by the wider views
         np.testing.assert_array_equal(getattr(twice, name), np.take(fields[name], vertices, axis=-1))
     assert twice.size == 3 and "beta" not in twice.__dict__ and "n" not in view.__dict__
-
-def test_columns_is_column_indexing():
-    a = np.arange(24.0).reshape(3, 8)
-    idx = np.array([5, 0, 0, 7])
-    np.testing.assert_array_equal(columns(a, idx), a[:, idx])

@@ -29,7 +29,7 @@ import numpy as np
 
 from ..bsdfs import MaterialLanes, Surface
 from ..mis import LIGHT_DELTA, Connections
-from ..vecmath import columns, dot
+from ..vecmath import dot
 from .subpaths import LIGHT, SURFACE, LensHits, Subpaths, Vertices, cos_at, reverse_pdf, to_area
 from .visibility import light_sample_blocked, segment_blocked
 
@@ -136,7 +136,7 @@ def emitter_hits(batch: Batch) -> Contributions | None:
 def _kept(batch: Batch, vertices: Vertices, value: np.ndarray) -> tuple[Vertices, np.ndarray]:
     """The vertices and values (C, n) of the useful contributions (see :meth:`Batch.useful`)."""
     keep = batch.useful(value)
-    return vertices.keep(keep), columns(value, keep)
+    return vertices.keep(keep), np.take(value, keep, axis=1)
 
 
 # -- s = 1 -----------------------------------------------------------------------------------------
@@ -160,8 +160,8 @@ def light_samples(batch: Batch) -> Contributions | None:
     useful = useful[~light_sample_blocked(scene, z.p, z.eps, z.n, ls, useful)]
     if not useful.size:
         return None
-    z, value, pdf_bsdf = z.keep(useful), columns(value, useful), pdf_bsdf[useful]
-    wi, entity, normal = columns(ls.wi, useful), ls.entity[useful], columns(ls.normal, useful)
+    z, value, pdf_bsdf = z.keep(useful), np.take(value, useful, axis=1), pdf_bsdf[useful]
+    wi, entity, normal = np.take(ls.wi, useful, axis=1), ls.entity[useful], np.take(ls.normal, useful, axis=1)
     distance = ls.distance[useful].astype(np.float64)
     infinite = ~np.isfinite(distance)
     dist2 = np.where(infinite, 1.0, distance * distance)
@@ -205,9 +205,10 @@ def lens_samples(batch: Batch) -> Contributions | None:
         return None
     if not batch.densities:
         lane = y.lane.take(useful)
-        return Contributions.make(lane, y.index.take(useful) + 1, 1, columns(value, useful),
-                                  raster=columns(raster, useful), flags=batch.lane_flags.take(lane))
-    y, value, wi, lens = y.keep(useful), columns(value, useful), columns(wi, useful), columns(lens, useful)
+        return Contributions.make(lane, y.index.take(useful) + 1, 1, np.take(value, useful, axis=1),
+                                  raster=np.take(raster, useful, axis=1), flags=batch.lane_flags.take(lane))
+    y, value = y.keep(useful), np.take(value, useful, axis=1)
+    wi, lens = np.take(wi, useful, axis=1), np.take(lens, useful, axis=1)
     pdf_fwd, pdf_back, we = pdf_fwd[useful], pdf_back[useful], we[useful]
     d = lens - y.p
     dist2 = dot(d, d)
@@ -219,9 +220,10 @@ def lens_samples(batch: Batch) -> Contributions | None:
     qs_rev = to_area(we * camera.lens_area * np.abs(camera.cos_to_axis(-wi)), y.n, wi, dist2)
     # y_{s-2} as the camera walk would go on to it (nothing for s = 1: pdf_back and g_prev are 0 there).
     qs_minus_rev = _at_previous(pdf_back * y.q_rev, y)
-    return Contributions.make(y.lane, y.index + 1, 1, value, raster=columns(raster, useful), qs_fwd=y.fwd,
-                              qs_rev=qs_rev, qs_minus_rev=qs_minus_rev, pt_fwd=np.full(y.size, 1.0 / camera.lens_area),
-                              pt_rev=pt_rev, flags=batch.lane_flags.take(y.lane))
+    return Contributions.make(y.lane, y.index + 1, 1, value, raster=np.take(raster, useful, axis=1),
+                              qs_fwd=y.fwd, qs_rev=qs_rev, qs_minus_rev=qs_minus_rev,
+                              pt_fwd=np.full(y.size, 1.0 / camera.lens_area), pt_rev=pt_rev,
+                              flags=batch.lane_flags.take(y.lane))
 
 
 def _toward_lens(batch: Batch, y: Vertices, on_light: np.ndarray, wi: np.ndarray, reverse: bool = True):
@@ -256,16 +258,17 @@ def lens_hits(batch: Batch) -> Contributions | None:
     # A point or spot light seen directly through the lens is not drawn (see lens_samples).
     direct_delta = (hits.index == 1) & (batch.lane_flags.take(hits.lane) & LIGHT_DELTA).astype(bool)
     keep = np.flatnonzero((hits.index <= batch.max_depth) & ~direct_delta & batch.wanted(hits.lane, hits.index + 1, 0))
-    lane, index, point, d = hits.lane[keep], hits.index[keep], columns(hits.point, keep), columns(hits.direction, keep)
+    lane, index = hits.lane[keep], hits.index[keep]
+    point, d = np.take(hits.point, keep, axis=1), np.take(hits.direction, keep, axis=1)
     leaving = -d.astype(np.float64)
     raster, inside = camera.raster(point + leaving, point)
-    value = np.where(inside, columns(hits.beta, keep) * camera.importance(leaving, point), 0.0)
+    value = np.where(inside, np.take(hits.beta, keep, axis=1) * camera.importance(leaving, point), 0.0)
     useful = batch.useful(value)
     if not useful.size:
         return None
-    lane, index, point, leaving, value, raster = (lane[useful], index[useful], columns(point, useful),
-                                                  columns(leaving, useful), columns(value, useful),
-                                                  columns(raster, useful))
+    lane, index, point, leaving, value, raster = (lane[useful], index[useful], np.take(point, useful, axis=1),
+                                                  np.take(leaving, useful, axis=1), np.take(value, useful, axis=1),
+                                                  np.take(raster, useful, axis=1))
     pdf, distance = hits.pdf[keep][useful], hits.distance[keep][useful].astype(np.float64)
     y = light.at(light.offset.take(lane) + index - 1)  # the last light vertex before the lens
     cos_lens = np.abs(camera.cos_to_axis(leaving))
@@ -299,12 +302,12 @@ def joins(batch: Batch):
     y_start = np.concatenate([[0], np.cumsum(ny)[:-1]])
     z_start = np.concatenate([[0], np.cumsum(nz)[:-1]])
     pair_start = np.concatenate([[0], np.cumsum(pairs)])
-    lane_of_pair = np.repeat(np.arange(lanes), pairs)
     for first, last in zip(batch.units[:-1], batch.units[1:]):
         for begin in range(int(pair_start[first]), int(pair_start[last]), CHUNK):
-            end = min(begin + CHUNK, int(pair_start[last]))
-            lane = lane_of_pair[begin:end]
-            local = np.arange(begin, end) - pair_start.take(lane)
+            k = np.arange(begin, min(begin + CHUNK, int(pair_start[last])))
+            lane = np.searchsorted(pair_start[:-1], k, side="right") - 1
+            # Lanes without pairs share their start with the next lane; searchsorted picks the last of them.
+            local = k - pair_start.take(lane)
             y = cy.take(y_start.take(lane) + local // nz.take(lane))
             z = cz.take(z_start.take(lane) + local % nz.take(lane))
             s, t = light.index.take(y) + 1, eye.index.take(z) + 1
@@ -354,7 +357,8 @@ def _join(batch: Batch, y: Vertices, z: Vertices) -> Contributions | None:
     useful = useful[~blocked]
     if not useful.size:
         return None
-    y, z, value, w, dist2 = y.keep(useful), z.keep(useful), columns(value, useful), columns(w, useful), dist2[useful]
+    y, z, dist2 = y.keep(useful), z.keep(useful), dist2[useful]
+    value, w = np.take(value, useful, axis=1), np.take(w, useful, axis=1)
     pdf_y, pdf_z = pdf_y[useful], pdf_z[useful]
     return Contributions.make(
         y.lane, y.index + 1, z.index + 1, value,

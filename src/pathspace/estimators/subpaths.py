@@ -239,13 +239,11 @@ class _Recorder:
         # Records hold vertices depth by depth, and a lane has one vertex of every index below its length:
         # vertex i of lane l goes to offset[l] + i.  Each field is concatenated over the records and gathered
         # into that order in one take (2-3x faster than writing record by record).
-        length = np.zeros(lanes, np.int64)
-        for record in self.records:
-            length[record["lane"]] += 1
-        offset = np.concatenate([[0], np.cumsum(length)]).astype(np.int64)
-        places = np.concatenate([offset.take(record["lane"]) + record["index"] for record in self.records])
-        order = np.empty(places.size, np.int64)
-        order[places] = np.arange(places.size)
+        lane = np.concatenate([record["lane"] for record in self.records])
+        index = np.concatenate([record["index"] for record in self.records])
+        offset = np.concatenate([[0], np.cumsum(np.bincount(lane, minlength=lanes))]).astype(np.int64)
+        order = np.empty(lane.size, np.int64)
+        order[offset.take(lane) + index] = np.arange(lane.size)
         fields = {name: np.take(np.concatenate([record[name] for record in self.records], axis=-1), order, axis=-1)
                   for name in FIELDS}
         return Subpaths(offset=offset, terminated=terminated, **fields)
