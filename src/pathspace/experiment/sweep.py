@@ -96,7 +96,7 @@ def sweep(scene, estimator: Any, grid: dict[str, Sequence[Any]], reference: Any,
         raise ValueError("threads: cells on a cluster render on one worker thread each")
     seeds = list(seeds)
     if len(set(seeds)) != len(seeds):
-        raise ValueError(f"seeds: expected distinct seeds, got {list(seeds)}")
+        raise ValueError(f"seeds: expected distinct seeds, got {seeds}")
     spec = EstimatorSpec.parse(estimator)
     ref, ref_variance = reference_image(reference)
     if ref_variance is None:
