@@ -18,6 +18,7 @@ import pathspace as ps
 from conftest import scene_dict
 from pathspace.estimators.bootstrap import GROUPS
 from pathspace.estimators.metropolis import contribution_function
+from pathspace.estimators.workers import PIECE
 from pathspace.spectra import RGBMode
 
 ALPHA = 1e-3
@@ -178,6 +179,20 @@ def test_same_seed_same_image_and_stats_are_reported():
     assert m["brightness_standard_error"] > 0
     assert np.isnan(a.variance).all()   # correlated passes: no per-pixel variance
     assert "bootstrap" in " ".join(a.stats["plan"])
+
+
+@pytest.mark.parametrize("estimator", ["pssmlt", "mmlt", "mlt"])
+def test_images_do_not_depend_on_threads(estimator):
+    """More chains than one group (workers.PIECE): groups, bootstrap batches and (with more pixels than a piece)
+    mlt's pixel ranges of direct paths run on several threads, and the image is bit for bit that of one thread."""
+    params = dict(spp=2, seed=7, max_depth=MAX_DEPTH, chains=PIECE + 1000, bootstrap=3 * (1 << 14) // 2)
+    resolution = (136, 128) if estimator == "mlt" else (64, 72)
+    one = ps.render(scene("cornell-box", resolution), estimator, threads=1, **params)
+    two = ps.render(scene("cornell-box", resolution), estimator, threads=2, **params)
+    np.testing.assert_array_equal(one.image, two.image)
+    assert one.stats["metropolis"] == {**two.stats["metropolis"],
+                                       "mutations_per_second": one.stats["metropolis"]["mutations_per_second"]}
+    assert one.stats["rays"] == two.stats["rays"]
 
 
 def test_time_budget():

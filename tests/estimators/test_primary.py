@@ -28,9 +28,14 @@ STEPS = [SmallStep("exponential", 1 / 64), SmallStep("exponential", 0.2), SmallS
          SmallStep("gaussian", 0.2)]
 
 
-def uniforms_of(seed: int):
-    rng = np.random.default_rng(seed)
+def uniforms_of(seed: int, key: tuple = ()):
+    rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=key))
     return lambda k: rng.random(k)
+
+
+def streams_of(seed: int):
+    """The bootstrap's random streams: one per key."""
+    return lambda key: uniforms_of(seed, key)
 
 
 def _wrap(x):
@@ -198,9 +203,9 @@ class Toy(Target):
 
 
 def run_toy(step: SmallStep, p_large: float, chains: int, steps: int, seed: int):
-    uniforms = uniforms_of(seed)
+    uniforms = uniforms_of(seed, (1 << 20,))   # the chains' stream, apart from the bootstrap's
     contribution = lambda values: values[1]   # noqa: E731
-    boot = bootstrap(Toy(), 1 << 16, chains, contribution, step, uniforms, 3, Counters(), lambda: None)
+    boot = bootstrap(Toy(), 1 << 16, chains, contribution, step, streams_of(seed), 3, Counters(), lambda: None)
     pixels = FILM[0] * FILM[1]
     chain = Chains(Toy(), contribution, step, p_large, uniforms, boot.label,
                    np.full(chains, pixels * boot.brightness[0] / chains), pixels, 3)
@@ -316,9 +321,9 @@ class Broken(Toy):
 
 
 def test_nonfinite_contributions_are_dropped_and_counted():
-    uniforms, step, counters = uniforms_of(13), SmallStep(), Counters()
+    uniforms, step, counters = uniforms_of(13, (1 << 20,)), SmallStep(), Counters()
     contribution = lambda values: values[1]   # noqa: E731
-    boot = bootstrap(Broken(), 4096, 256, contribution, step, uniforms, 3, counters, lambda: None)
+    boot = bootstrap(Broken(), 4096, 256, contribution, step, streams_of(13), 3, counters, lambda: None)
     chain = Chains(Broken(), contribution, step, 0.3, uniforms, boot.label, np.ones(256), 64, 3)
     chain.start(boot.numbers, counters)
     image = np.zeros((3, 64))

@@ -39,12 +39,15 @@ def test_snapshots_equal_independent_renders(box):
 
 
 def test_time_budgets_and_views(box):
+    # A budget of many passes even when the tests share the cores (pytest -n auto): under a 0.6-s budget an
+    # LT run whose first items were slowed down that much completed no pass.
     scene, reference = box
-    result = converge(scene, ["pt", ("lt", {"rr": "fixed"})], reference, time=0.6, seeds=(0, 1))
+    budget = 1.5
+    result = converge(scene, ["pt", ("lt", {"rr": "fixed"})], reference, time=budget, seeds=(0, 1))
     table = result.table
     assert set(table["estimator"]) == {"pt", "lt (rr=fixed)"}
     final = table[table["final"]]
-    assert np.all(final["seconds"] < 0.6 + 0.2) and np.all(final["seconds"] > 0.6 * 0.95)
+    assert np.all(final["seconds"] < budget + 0.2) and np.all(final["seconds"] > budget * 0.95)
     at = result.at(spp=int(final["spp"].min()))
     assert list(at.columns) == ["relmse", "relmse_error"] and len(at) == 2
     summary = result.summary()

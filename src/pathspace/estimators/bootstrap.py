@@ -28,7 +28,8 @@ from typing import Callable
 import numpy as np
 
 from .base import Counters
-from .primary import ChainStates, SmallStep
+from .primary import ChainStates, SmallStep, Uniforms
+from .workers import in_rounds
 
 __all__ = ["BATCH", "GROUPS", "BootstrapResult", "Strata", "allocate", "bootstrap", "reservoir_draw"]
 
@@ -86,38 +87,47 @@ class Strata:
         return pixel, np.stack([(pixel % width + x) / width, (pixel // width + y) / height]), group
 
 
-def bootstrap(target, samples: int, chains: int, contribution, step: SmallStep, uniforms,
-              channels: int, counters: Counters, check: Callable[[], None]) -> BootstrapResult:
+def bootstrap(target, samples: int, chains: int, contribution, step: SmallStep, streams: Callable[[tuple], Uniforms],
+              channels: int, counters: Counters, check: Callable[[], None], threads: int = 1) -> BootstrapResult:
     """Estimate every class's brightness from ``samples`` independent samples per class and draw the chains'
-    starts (see the module docstring); ``uniforms`` supplies every random number."""
+    starts (see the module docstring).  ``streams(key)`` supplies the random numbers: ``()`` those of the strata
+    and the reservoirs, ``(class, batch)`` those of one batch of samples; batches are evaluated ``threads`` at a
+    time (the result does not depend on ``threads``)."""
     from .metropolis import Chains
+
+    uniforms = streams(())
+    strata = [Strata(target.film, samples, uniforms) for _ in range(target.classes)]
+
+    def evaluate(batch: tuple[int, int, Uniforms]) -> tuple[np.ndarray, np.ndarray, dict[str, ChainStates], Counters]:
+        label, start, draw = batch
+        check()
+        own = Counters()
+        index = np.arange(start, min(start + BATCH, samples))
+        chains_of_batch = Chains(target, contribution, step, 1.0, draw, np.full(index.size, label),
+                                 np.ones(index.size), 1, channels)
+        chains_of_batch.counters["large"][:] = True
+        _, film, group = strata[label].place(index, draw)
+        if film is not None:
+            first = chains_of_batch.states[target.streams[0]]
+            first.set_proposal(0, film[0])
+            first.set_proposal(1, film[1])
+        _, f = chains_of_batch._evaluate(own)
+        return f, group, chains_of_batch.states, own
 
     sums = np.zeros((target.classes, GROUPS + 1))      # per class and group (the last: the incomplete round)
     counts = np.zeros(GROUPS + 1)
     squares = np.zeros(target.classes)
-    picks: list[dict] = []
-    for label in range(target.classes):
-        strata = Strata(target.film, samples, uniforms)
-        reservoir: dict = {"total": 0.0, "numbers": {}}
-        for start in range(0, samples, BATCH):
-            check()
-            index = np.arange(start, min(start + BATCH, samples))
-            batch = Chains(target, contribution, step, 1.0, uniforms, np.full(index.size, label),
-                           np.ones(index.size), 1, channels)
-            batch.counters["large"][:] = True
-            _, film, group = strata.place(index, uniforms)
-            if film is not None:
-                first = batch.states[target.streams[0]]
-                first.set_proposal(0, film[0])
-                first.set_proposal(1, film[1])
-            _, f = batch._evaluate(counters)
-            slot = np.where(group < 0, GROUPS, group)
-            sums[label] += np.bincount(slot, weights=f, minlength=GROUPS + 1)
-            if label == 0:   # every class has the same strata
-                counts += np.bincount(slot, minlength=GROUPS + 1)
-            squares[label] += (f * f).sum()
-            _reservoir(reservoir, f, batch.states, chains, uniforms)
-        picks.append(reservoir)
+    picks: list[dict] = [{"total": 0.0, "numbers": {}} for _ in range(target.classes)]
+    batches = [(label, start, streams((label, start // BATCH)))
+               for label in range(target.classes) for start in range(0, samples, BATCH)]
+    for (label, _, _), (f, group, states, own) in in_rounds(threads, evaluate, batches):
+        counters.merge(own)
+        slot = np.where(group < 0, GROUPS, group)
+        sums[label] += np.bincount(slot, weights=f, minlength=GROUPS + 1)
+        if label == 0:   # every class has the same strata
+            counts += np.bincount(slot, minlength=GROUPS + 1)
+        squares[label] += (f * f).sum()
+        _reservoir(picks[label], f, states, chains, uniforms)
     brightness = sums.sum(axis=1) / samples
     groups = np.flatnonzero(counts[:GROUPS] > 0)
     if groups.size >= 2:

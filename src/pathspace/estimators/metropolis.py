@@ -40,7 +40,11 @@ and the current state with weight 1 - a (expected values; Veach 1997,
 sec. 11.4.2).  A pass is ceil(P / chains) steps of every chain (at least one
 mutation per pixel; one step of every chain when there are more chains than
 pixels), so a render of ``spp`` passes makes at least spp x P mutations; each
-pass's splats form one image estimate on the film.  Renders of disjoint pass
+pass's splats form one image estimate on the film.  The chains step in groups of
+at most :data:`~pathspace.estimators.workers.PIECE`, each with its own random
+stream, on the render's threads (and the bootstrap evaluates its batches so):
+the groups depend on the number of chains alone, so the image does not depend
+on the thread count.  Renders of disjoint pass
 ranges (``first_pass``) run their own bootstrap and chains.  Passes
 of the same chains are correlated, so the film's per-pixel variance
 underestimates the error: estimate it from independent renders (seeds).
@@ -50,7 +54,7 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from functools import partial
-from typing import Callable, ClassVar
+from typing import Callable, ClassVar, Sequence
 
 import numpy as np
 
@@ -59,9 +63,10 @@ from .base import Budget, Checkpoint, Counters, Estimator, RenderJob, parameter
 from .bootstrap import bootstrap
 from .control import Interrupted
 from .primary import KERNELS, ChainStates, SmallStep, advance, new_counters
+from .workers import in_parallel, split
 
 __all__ = ["CONTRIBUTIONS", "Metropolis", "Proposal", "Target", "Chains", "Splatting", "chain_statistics",
-           "contribution_function", "run_passes", "uniform_stream"]
+           "contribution_function", "run_passes", "step_groups", "uniform_stream"]
 
 CONTRIBUTIONS = ("luminance", "xyz", "max")
 # Random streams of a render (the first number of each unit key); unit keys carry the class and batch.
@@ -145,10 +150,6 @@ class Splatting:
             mask = kind == code
             self.proposed[name] += int(mask.sum())
             self.accepted[name] += int((mask & accept).sum())
-
-    def acceptance(self) -> dict:
-        """Accepted / proposed per kind of mutation (None: never proposed)."""
-        return {k: self.accepted[k] / self.proposed[k] if self.proposed[k] else None for k in self.proposed}
 
     def flush(self, image: np.ndarray, chains: np.ndarray | None = None) -> None:
         """Splat the pending weight of the current states of ``chains`` (bool per chain; None: all)."""
@@ -246,7 +247,8 @@ class Metropolis(Estimator):
 
     independent_passes = False
 
-    chains: int = parameter(16384, "Markov chains advanced together (one wavefront)", _positive_integer)
+    chains: int = parameter(16384, "Markov chains, stepped in groups of at most 16384 (one wavefront each) on the "
+                                   "render's threads", _positive_integer)
     bootstrap: int = parameter(1 << 16, "independent samples per chain class that estimate the image brightness "
                                         "and the chains' starting states", _positive_integer)
     p_large: float = parameter(0.3, "probability of a large step (fresh numbers) per mutation",
@@ -288,8 +290,8 @@ class Metropolis(Estimator):
         stats = job.stats.setdefault("metropolis", {})
         try:
             boot = bootstrap(target, self.bootstrap, self.chains, contribution, step,
-                             uniform_stream(job, (_BOOTSTRAP, budget.first_pass)),
-                             film.channels, job.counters, control.check)
+                             lambda key: uniform_stream(job, (_BOOTSTRAP, budget.first_pass) + key),
+                             film.channels, job.counters, control.check, job.threads)
         except Interrupted:
             return
         stats.update(bootstrap=boot.samples, brightness=float(boot.brightness.sum()),
@@ -302,22 +304,21 @@ class Metropolis(Estimator):
             return
         per_class = np.bincount(boot.label, minlength=target.classes)
         scale = pixels * boot.brightness.take(boot.label) / per_class.take(boot.label)
-        chains = Chains(target, contribution, step, self.p_large, uniform_stream(job, (_CHAINS, budget.first_pass)),
-                        boot.label, scale, pixels, film.channels)
-        chains.start(boot.numbers, job.counters)
+        parts = split(boot.label.size)
+        groups = [Chains(target, contribution, step, self.p_large, uniform_stream(job, (_CHAINS, budget.first_pass, g)),
+                         boot.label[part], scale[part], pixels, film.channels) for g, part in enumerate(parts)]
+
+        def start(g: int) -> Counters:
+            counters = Counters()
+            groups[g].start({name: numbers[parts[g]] for name, numbers in boot.numbers.items()}, counters)
+            return counters
+
+        for counters in in_parallel(job.threads, start, range(len(groups))):
+            job.counters.merge(counters)
         steps = -(-pixels // boot.label.size)
-
-        def one_pass(_: int) -> np.ndarray:
-            image = np.zeros((film.channels, pixels))
-            for _ in range(steps):
-                control.check()
-                chains.step_all(image, job.counters)
-            chains.flush(image)
-            return image / steps
-
         started = control.elapsed()
-        passes = run_passes(job, budget, on_checkpoint, one_pass)
-        stats.update(chain_statistics(chains, per_class, passes, steps, control.elapsed() - started))
+        passes = run_passes(job, budget, on_checkpoint, lambda _: step_groups(job, groups, steps))
+        stats.update(chain_statistics(groups, per_class, passes, steps, control.elapsed() - started))
 
     def _black_passes(self, job: RenderJob, budget: Budget) -> None:
         """Nothing contributes (the bootstrap found no light): the budget's passes are black."""
@@ -348,17 +349,42 @@ def run_passes(job: RenderJob, budget: Budget, on_checkpoint: Callable[[Checkpoi
     return passes
 
 
-def chain_statistics(chains: Splatting | None, per_class: np.ndarray, passes: int, steps: int,
+def step_groups(job: RenderJob, groups: Sequence[Splatting], steps: int) -> np.ndarray:
+    """One pass of independent groups of chains (each with a ``step_all``) on the render's threads: ``steps``
+    steps of every chain, then the splats still pending; the pass's image (C, pixels), summed over the groups in
+    their order."""
+    film, control = job.film, job.control
+
+    def walk(chains) -> tuple[np.ndarray, Counters]:
+        image, counters = np.zeros((film.channels, film.pixel_count)), Counters()
+        for _ in range(steps):
+            control.check()
+            chains.step_all(image, counters)
+        chains.flush(image)
+        return image, counters
+
+    image = np.zeros((film.channels, film.pixel_count))
+    for part, counters in in_parallel(job.threads, walk, groups):
+        image += part
+        job.counters.merge(counters)
+    return image / steps
+
+
+def chain_statistics(groups: Sequence[Splatting], per_class: np.ndarray, passes: int, steps: int,
                      seconds: float) -> dict:
-    """What a Metropolis render reports of its chains after ``passes`` of ``steps`` steps in ``seconds`` (see
-    ``docs/metropolis.md``); ``per_class``: chains per class."""
+    """What a Metropolis render reports of its ``groups`` of chains after ``passes`` of ``steps`` steps in
+    ``seconds`` (see ``docs/metropolis.md``); ``per_class``: chains per class."""
     count = int(per_class.sum())
     mutations = passes * steps * count
     found = dict(chains=count, chains_per_class=per_class.tolist(), steps_per_pass=steps, mutations=mutations,
                  mutations_per_second=mutations / seconds if seconds > 0 else 0.0)
-    if chains is not None:
-        found.update(acceptance=chains.acceptance(), longest_rejection_run=int(chains.longest_rejections.max()),
-                     longest_rejection_run_median=float(np.median(chains.longest_rejections)))
+    if groups:
+        proposed = {kind: sum(g.proposed[kind] for g in groups) for kind in groups[0].proposed}
+        accepted = {kind: sum(g.accepted[kind] for g in groups) for kind in groups[0].accepted}
+        longest = np.concatenate([g.longest_rejections for g in groups])
+        found.update(acceptance={k: accepted[k] / proposed[k] if proposed[k] else None for k in proposed},
+                     longest_rejection_run=int(longest.max()),
+                     longest_rejection_run_median=float(np.median(longest)))
     return found
 
 

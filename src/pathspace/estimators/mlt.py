@@ -50,11 +50,13 @@ from .bidirectional import STREAMS
 from .bootstrap import BATCH, GROUPS, allocate, reservoir_draw
 from .control import Interrupted
 from .metropolis import (CONTRIBUTIONS, Proposal, Splatting, chain_statistics, contribution_function, run_passes,
-                         uniform_stream)
+                         step_groups, uniform_stream)
 from .parameters import or_none
 from . import path_mutations as mutations
-from .path_mutations import ADD_SPREAD, Lengths, Proposed, fresh_paths
+from .path_mutations import ADD_SPREAD, FreshPaths, Lengths, Proposed, fresh_paths
 from .paths import Paths, PathValues, Space
+from .primary import Uniforms
+from .workers import in_parallel, in_rounds, split
 
 __all__ = ["MLT", "PathChains"]
 
@@ -79,6 +81,12 @@ class Bootstrap:
     paths: Paths
     values: PathValues | None      # None without chains
     label: np.ndarray
+
+    def part(self, chains: slice) -> "Bootstrap":
+        """The starts of the chains ``chains`` (the brightness is the whole render's)."""
+        lanes = np.arange(chains.start, chains.stop)
+        return Bootstrap(self.brightness, self.standard_error, self.paths.take(lanes), self.values.take(lanes),
+                         self.label[chains])
 
 
 class PathChains(Splatting):
@@ -156,7 +164,8 @@ class MLT(Estimator):
                                          "by the chains (Veach's direct lighting, extended); default: 4, or "
                                          "max_depth - 1 if smaller; 0: the chains render every length",
                                    or_none(partial(integer, low=0)))
-    chains: int = parameter(16384, "Markov chains advanced together (one wavefront)", partial(integer, low=1))
+    chains: int = parameter(16384, "Markov chains, stepped in groups of at most 16384 (one wavefront each) on the "
+                                   "render's threads", partial(integer, low=1))
     bootstrap: int = parameter(1 << 14, "independent samples per path length (pairs of a light and a camera "
                                         "walk, joined in every way) that estimate its brightness and the chains' "
                                         "starting paths", partial(integer, low=1))
@@ -228,8 +237,9 @@ class MLT(Estimator):
         stats = job.stats.setdefault("metropolis", {})
         try:
             space = Space(job.scene, job.mode)
-            boot = self._bootstrap(space, contribution, uniform_stream(job, (_BOOTSTRAP, budget.first_pass)),
-                                   job.counters, control.check)
+            boot = self._bootstrap(space, contribution,
+                                   lambda key: uniform_stream(job, (_BOOTSTRAP, budget.first_pass) + key),
+                                   job.counters, control.check, job.threads)
         except Interrupted:
             return
         direct = self.direct_estimator if job.scene.lights.count else None
@@ -238,60 +248,75 @@ class MLT(Estimator):
                      brightness_degrees_of_freedom=GROUPS - 1,
                      class_brightness=boot.brightness.tolist(),
                      class_brightness_standard_error=boot.standard_error.tolist(), direct=self.direct)
-        chains = None
         per_class = np.bincount(boot.label, minlength=boot.brightness.size)
+        groups = []
         if boot.label.size:
             scale = pixels * boot.brightness.take(boot.label) / per_class.take(boot.label)
-            chains = PathChains(space, self, contribution, boot, scale, pixels,
-                                uniform_stream(job, (_CHAINS, budget.first_pass)))
-        steps = -(-pixels // max(boot.label.size, 1)) if chains is not None else 0
+            groups = [PathChains(space, self, contribution, boot.part(part), scale[part], pixels,
+                                 uniform_stream(job, (_CHAINS, budget.first_pass, g)))
+                      for g, part in enumerate(split(boot.label.size))]
+        steps = -(-pixels // boot.label.size) if groups else 0
 
         def one_pass(index: int) -> np.ndarray:
-            image = np.zeros((film.channels, pixels))
-            if chains is not None:
-                for _ in range(steps):
-                    control.check()
-                    chains.step_all(image, job.counters)
-                chains.flush(image)
-                image /= steps
+            image = step_groups(job, groups, steps) if groups else np.zeros((film.channels, pixels))
             if direct is not None:
                 image += self._direct(job, index)
             return image
 
         started = control.elapsed()
         passes = run_passes(job, budget, on_checkpoint, one_pass)
-        stats.update(chain_statistics(chains, per_class, passes, steps, control.elapsed() - started))
+        stats.update(chain_statistics(groups, per_class, passes, steps, control.elapsed() - started))
 
     def _direct(self, job: RenderJob, pass_index: int) -> np.ndarray:
-        """One BDPT sample per pixel of the paths of at most ``direct`` segments (3, pixels)."""
+        """One BDPT sample per pixel of the paths of at most ``direct`` segments (3, pixels), in ranges of pixels
+        (each with its own random streams) on the render's threads."""
         pixels = job.film.pixel_count
-        samplers = {name: job.samplers.open([(_DIRECT, pass_index, code)], [pixels]) for name, code in STREAMS.items()}
-        found = self.direct_estimator.evaluate(job.scene, np.arange(pixels), samplers, job.mode, job.counters)
-        return np.stack([np.bincount(found.pixel, weights=found.weighted[c], minlength=pixels)
-                         for c in range(job.film.channels)])
+        ranges = [(part, {name: job.samplers.open([(_DIRECT, pass_index, code, part.start)], [part.stop - part.start])
+                          for name, code in STREAMS.items()}) for part in split(pixels)]
 
-    def _bootstrap(self, space: Space, contribution, uniforms, counters: Counters, check) -> Bootstrap:
-        """b_L with its standard error per path length, and the chains' starts (see the module docstring)."""
+        def render_range(work: tuple[slice, dict]) -> tuple[np.ndarray, Counters]:
+            (part, samplers), counters = work, Counters()
+            job.control.check()
+            found = self.direct_estimator.evaluate(job.scene, np.arange(part.start, part.stop), samplers, job.mode,
+                                                   counters)
+            return np.stack([np.bincount(found.pixel, weights=found.weighted[c], minlength=pixels)
+                             for c in range(job.film.channels)]), counters
+
+        image = np.zeros((job.film.channels, pixels))
+        for part, counters in in_parallel(job.threads, render_range, ranges):
+            image += part
+            job.counters.merge(counters)
+        return image
+
+    def _bootstrap(self, space: Space, contribution, streams, counters: Counters, check, threads: int) -> Bootstrap:
+        """b_L with its standard error per path length, and the chains' starts (see the module docstring);
+        ``streams(key)``: the random numbers of the reservoirs (key ``()``) and of each batch of walks (``(length,
+        batch)``), whose walks are made ``threads`` batches at a time."""
         first = self.direct + 1
         classes = self.max_depth - first + 1
-        sums = np.zeros((classes, GROUPS))
-        picks = []
+        uniforms = streams(())
+
+        def walk(batch: tuple[int, int, int, Uniforms]) -> tuple[FreshPaths, np.ndarray, int]:
+            label, start, count, draw = batch
+            check()
+            fresh = fresh_paths(space, np.full(count, first + label), first + label + 1, draw)
+            weighted = fresh.weights()
+            c = contribution(weighted)
+            finite = np.isfinite(weighted).all(axis=0) & np.isfinite(c)
+            return fresh, np.where(finite, c, 0.0), int(finite.size - np.count_nonzero(finite))
+
+        batches = []
         for label in range(classes if space.scene.lights.count else 0):
-            length = first + label
-            reservoir: dict = {"total": 0.0, "paths": None}
-            batch = max(1, BATCH // (length + 1))      # pairs of walks; each makes length + 1 paths
-            for start in range(0, self.bootstrap, batch):
-                check()
-                count = min(batch, self.bootstrap - start)
-                fresh = fresh_paths(space, np.full(count, length), length + 1, uniforms)
-                weighted = fresh.weights()
-                c = contribution(weighted)
-                finite = np.isfinite(weighted).all(axis=0) & np.isfinite(c)
-                counters.nonfinite_contributions += int(finite.size - np.count_nonzero(finite))
-                c = np.where(finite, c, 0.0)
-                sums[label] += np.bincount((start + fresh.pair) % GROUPS, weights=c, minlength=GROUPS)
-                _keep(reservoir, c, fresh.paths, self.chains, uniforms)
-            picks.append(reservoir["paths"])
+            size = max(1, BATCH // (first + label + 1))      # pairs of walks; each makes length + 1 paths
+            batches += [(label, start, min(size, self.bootstrap - start), streams((label, start // size)))
+                        for start in range(0, self.bootstrap, size)]
+        sums = np.zeros((classes, GROUPS))
+        reservoirs = [{"total": 0.0, "paths": None} for _ in range(classes)]
+        for (label, start, _, _), (fresh, c, nonfinite) in in_rounds(threads, walk, batches):
+            counters.nonfinite_contributions += nonfinite
+            sums[label] += np.bincount((start + fresh.pair) % GROUPS, weights=c, minlength=GROUPS)
+            _keep(reservoirs[label], c, fresh.paths, self.chains, uniforms)
+        picks = [reservoir["paths"] for reservoir in reservoirs]
         per_group = self.bootstrap / GROUPS
         brightness = sums.sum(axis=1) / self.bootstrap
         standard_error = (sums / per_group).std(axis=1, ddof=1) / np.sqrt(GROUPS)
