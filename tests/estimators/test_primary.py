@@ -311,6 +311,21 @@ def test_rejected_proposals_keep_the_state_and_accepted_ones_take_it():
     assert np.all(np.isnan(states.numbers(np.arange(n), proposal=True)))
 
 
+def test_fresh_states_serve_the_stream_s_uniforms_and_clear_what_they_drew():
+    """The bootstrap's independent samples: numbers not given are the next uniforms of the stream, in the order
+    they are asked for; clearing forgets every number drawn or given."""
+    n, k = 64, 60
+    states = ChainStates(n, SmallStep(), uniforms_of(12), fresh=True)
+    states.set_proposal(0, np.full(k, 0.5))
+    rows, columns = np.repeat(np.arange(k), 40), np.tile(np.arange(40), k)   # past the stored width
+    drawn = states.fetch(rows, columns).reshape(k, 40)
+    assert np.all(drawn[:, 0] == 0.5)
+    np.testing.assert_array_equal(drawn[:, 1:].ravel(), uniforms_of(12)(k * 39))
+    np.testing.assert_array_equal(states.numbers(np.arange(k), proposal=True)[:, :40], drawn)
+    states.clear()
+    assert np.isnan(states.proposal).all() and states.current is None
+
+
 class Broken(Toy):
     """The toy target with a NaN in every seventh lane's contribution."""
 

@@ -93,34 +93,38 @@ def bootstrap(target, samples: int, chains: int, contribution, step: SmallStep, 
     starts (see the module docstring).  ``streams(key)`` supplies the random numbers: ``()`` those of the strata
     and the reservoirs, ``(class, batch)`` those of one batch of samples; batches are evaluated ``threads`` at a
     time (the result does not depend on ``threads``)."""
-    from .metropolis import Chains
+    from .metropolis import evaluate_target
 
     uniforms = streams(())
     strata = [Strata(target.film, samples, uniforms) for _ in range(target.classes)]
+    # One set of fresh states per batch evaluated at once (in_rounds takes `threads` consecutive batches), reused
+    # from round to round: cleared, they cost what a batch draws, where new ones would grow to its width anew.
+    workspaces = [{name: ChainStates(BATCH, step, uniforms, fresh=True) for name in target.streams}
+                  for _ in range(max(threads, 1))]
 
-    def evaluate(batch: tuple[int, int, Uniforms]) -> tuple[np.ndarray, np.ndarray, dict[str, ChainStates], Counters]:
-        label, start, draw = batch
+    def evaluate(batch: tuple[int, int, Uniforms, dict[str, ChainStates]]) -> tuple[np.ndarray, np.ndarray, Counters]:
+        label, start, draw, states = batch
         check()
         own = Counters()
         index = np.arange(start, min(start + BATCH, samples))
-        chains_of_batch = Chains(target, contribution, step, 1.0, draw, np.full(index.size, label),
-                                 np.ones(index.size), 1, channels)
-        chains_of_batch.counters["large"][:] = True
+        for s in states.values():
+            s.uniforms = draw
         _, film, group = strata[label].place(index, draw)
         if film is not None:
-            first = chains_of_batch.states[target.streams[0]]
+            first = states[target.streams[0]]
             first.set_proposal(0, film[0])
             first.set_proposal(1, film[1])
-        _, f = chains_of_batch._evaluate(own)
-        return f, group, chains_of_batch.states, own
+        _, f = evaluate_target(target, states, np.full(index.size, label), contribution, own)
+        return f, group, own
 
     sums = np.zeros((target.classes, GROUPS + 1))      # per class and group (the last: the incomplete round)
     counts = np.zeros(GROUPS + 1)
     squares = np.zeros(target.classes)
     picks: list[dict] = [{"total": 0.0, "numbers": {}} for _ in range(target.classes)]
-    batches = [(label, start, streams((label, start // BATCH)))
-               for label in range(target.classes) for start in range(0, samples, BATCH)]
-    for (label, _, _), (f, group, states, own) in in_rounds(threads, evaluate, batches):
+    batches = [(label, start) for label in range(target.classes) for start in range(0, samples, BATCH)]
+    batches = [(label, start, streams((label, start // BATCH)), workspaces[k % len(workspaces)])
+               for k, (label, start) in enumerate(batches)]
+    for (label, _, _, states), (f, group, own) in in_rounds(threads, evaluate, batches):
         counters.merge(own)
         slot = np.where(group < 0, GROUPS, group)
         sums[label] += np.bincount(slot, weights=f, minlength=GROUPS + 1)
@@ -128,6 +132,8 @@ def bootstrap(target, samples: int, chains: int, contribution, step: SmallStep, 
             counts += np.bincount(slot, minlength=GROUPS + 1)
         squares[label] += (f * f).sum()
         _reservoir(picks[label], f, states, chains, uniforms)
+        for s in states.values():
+            s.clear()
     brightness = sums.sum(axis=1) / samples
     groups = np.flatnonzero(counts[:GROUPS] > 0)
     if groups.size >= 2:
@@ -178,20 +184,23 @@ def reservoir_draw(reservoir: dict, f: np.ndarray, slots: int, uniforms) -> tupl
 
 
 def _reservoir(reservoir: dict, f: np.ndarray, states: dict[str, ChainStates], slots: int, uniforms) -> None:
-    """:func:`reservoir_draw` of the numbers of chain states ``states``."""
+    """:func:`reservoir_draw` of the numbers of chain states ``states`` (only the replaced slots are copied)."""
     drawn = reservoir_draw(reservoir, f, slots, uniforms)
     if drawn is None:
         return
     candidate, replace = drawn
+    rows = np.flatnonzero(replace)
     for name, s in states.items():
-        chosen = s.numbers(candidate, proposal=True)
+        chosen = s.numbers(candidate.take(rows), proposal=True)
         held = reservoir["numbers"].get(name)
-        if held is None:
+        if held is None:     # the first batch with weight replaces every slot (its share of the total is 1)
             reservoir["numbers"][name] = chosen
             continue
-        width = max(held.shape[1], chosen.shape[1])
-        held, chosen = (np.pad(a, ((0, 0), (0, width - a.shape[1])), constant_values=np.nan) for a in (held, chosen))
-        reservoir["numbers"][name] = np.where(replace[:, None], chosen, held)
+        if held.shape[1] < chosen.shape[1]:
+            held = np.pad(held, ((0, 0), (0, chosen.shape[1] - held.shape[1])), constant_values=np.nan)
+            reservoir["numbers"][name] = held
+        held[rows, :chosen.shape[1]] = chosen
+        held[rows, chosen.shape[1]:] = np.nan
 
 
 def allocate(brightness: np.ndarray, chains: int) -> np.ndarray:

@@ -66,7 +66,7 @@ from .primary import KERNELS, ChainStates, SmallStep, advance, new_counters
 from .workers import in_parallel, split
 
 __all__ = ["CONTRIBUTIONS", "Metropolis", "Proposal", "Target", "Chains", "Splatting", "chain_statistics",
-           "contribution_function", "run_passes", "step_groups", "uniform_stream"]
+           "contribution_function", "evaluate_target", "run_passes", "step_groups", "uniform_stream"]
 
 CONTRIBUTIONS = ("luminance", "xyz", "max")
 # Random streams of a render (the first number of each unit key); unit keys carry the class and batch.
@@ -111,6 +111,21 @@ def contribution_function(kind: str, mode) -> Callable[[np.ndarray], np.ndarray]
         to_xyz = np.eye(3)
     row = to_xyz[1] if kind == "luminance" else to_xyz.sum(axis=0)
     return lambda values: np.abs(row @ values)
+
+
+def evaluate_target(target: Target, states: dict[str, ChainStates], label: np.ndarray,
+                    contribution: Callable[[np.ndarray], np.ndarray], counters: Counters) -> tuple[Proposal, np.ndarray]:
+    """The contributions of the proposals of chains 0 .. ``label.size`` - 1 (of classes ``label``) in ``states``,
+    and their scalar contributions f (per chain); contributions with a NaN or Inf are dropped and counted."""
+    proposal = target.evaluate(states, np.arange(label.size), label, counters)
+    scalar = contribution(proposal.value)
+    finite = np.isfinite(proposal.value).all(axis=0) & np.isfinite(scalar)
+    if not finite.all():
+        counters.nonfinite_contributions += int(finite.size - np.count_nonzero(finite))
+        keep = np.flatnonzero(finite)
+        proposal = Proposal(proposal.lane.take(keep), proposal.pixel.take(keep), proposal.value.take(keep, axis=1))
+        scalar = scalar.take(keep)
+    return proposal, np.bincount(proposal.lane, weights=scalar, minlength=label.size)
 
 
 class Splatting:
@@ -202,17 +217,8 @@ class Chains(Splatting):
             states.settle(np.zeros(rows.size, bool))
 
     def _evaluate(self, counters: Counters) -> tuple[Proposal, np.ndarray]:
-        """The proposals' contributions and f; contributions with a NaN or Inf are dropped and counted."""
-        proposal = self.target.evaluate(self.states, np.arange(self.label.size), self.label, counters)
-        scalar = self.contribution(proposal.value)
-        finite = np.isfinite(proposal.value).all(axis=0) & np.isfinite(scalar)
-        if not finite.all():
-            counters.nonfinite_contributions += int(finite.size - np.count_nonzero(finite))
-            keep = np.flatnonzero(finite)
-            proposal = Proposal(proposal.lane.take(keep), proposal.pixel.take(keep), proposal.value.take(keep, axis=1))
-            scalar = scalar.take(keep)
-        f = np.bincount(proposal.lane, weights=scalar, minlength=self.label.size)
-        return proposal, f
+        """The proposals' contributions and f (see :func:`evaluate_target`)."""
+        return evaluate_target(self.target, self.states, self.label, self.contribution, counters)
 
     def step_all(self, image: np.ndarray, counters: Counters) -> None:
         """One mutation of every chain, splatting into ``image`` (C, pixels)."""

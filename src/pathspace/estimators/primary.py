@@ -165,39 +165,42 @@ class ChainStates:
     ``current`` (its value, up to date at ``stamp`` accepted proposals; -1:
     never drawn) and ``proposal`` (NaN until the proposal draws it).  With
     ``replay`` set, the proposal is the current state (numbers not drawn
-    before are drawn for both).
+    before are drawn for both).  ``fresh`` states hold no chains, only
+    proposals of fresh uniforms (independent samples, as the bootstrap takes
+    them); :meth:`clear` readies them for the next batch.
     The chains' counters are shared by all streams of the chains: pass the
     same ``counters`` dict to each stream's ChainStates.
     """
 
     def __init__(self, chains: int, step: SmallStep, uniforms: Uniforms, counters: dict[str, np.ndarray] | None = None,
-                 width: int = 16) -> None:
-        self.step, self.uniforms = step, uniforms
+                 width: int = 16, fresh: bool = False) -> None:
+        self.step, self.uniforms, self.fresh = step, uniforms, fresh
         self.counters = counters if counters is not None else new_counters(chains)
         # Numbers are stored number by number: (width, chains), so that a wavefront drawing number j of its
         # lanes reads one contiguous row; flat index = j * chains + chain, unchanged when the width grows.
-        self.current = np.zeros((width, chains))
-        self.stamp = np.full((width, chains), -1, dtype=np.int64)
         self.proposal = np.full((width, chains), np.nan)
-        self.drawn: list[np.ndarray] = []   # flat indices of the numbers the proposal has drawn
+        self.current = None if fresh else np.zeros((width, chains))
+        self.stamp = None if fresh else np.full((width, chains), -1, dtype=np.int64)
+        self.drawn: list[np.ndarray] = []   # flat indices of the numbers the proposal has drawn (or was given)
         self.replay = False   # True: the "proposal" is the current state itself (to evaluate a chain's start)
 
     @property
     def chains(self) -> int:
         """Number of chains."""
-        return self.current.shape[1]
+        return self.proposal.shape[1]
 
     @property
     def width(self) -> int:
         """Numbers per chain stored so far."""
-        return self.current.shape[0]
+        return self.proposal.shape[0]
 
     def _grow(self, width: int) -> None:
         # At least double: a walk draws its numbers a few at a time, and each growth copies every number.
         extra = max(width - self.width, self.width, 16)
-        self.current = np.concatenate([self.current, np.zeros((extra, self.chains))])
-        self.stamp = np.concatenate([self.stamp, np.full((extra, self.chains), -1, np.int64)])
         self.proposal = np.concatenate([self.proposal, np.full((extra, self.chains), np.nan)])
+        if not self.fresh:
+            self.current = np.concatenate([self.current, np.zeros((extra, self.chains))])
+            self.stamp = np.concatenate([self.stamp, np.full((extra, self.chains), -1, np.int64)])
 
     def fetch(self, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
         """The proposal's numbers ``columns`` of chains ``rows`` (same shapes), drawing those not drawn yet."""
@@ -209,7 +212,7 @@ class ChainStates:
         missing = np.flatnonzero(np.isnan(u))
         if missing.size:
             where = flat.take(missing)
-            drawn = self._propose(rows.take(missing), where)
+            drawn = self.uniforms(where.size) if self.fresh else self._propose(rows.take(missing), where)
             u[missing] = drawn
             proposal.put(where, drawn)
             self.drawn.append(where)
@@ -248,10 +251,14 @@ class ChainStates:
         if self.drawn:
             flat = np.concatenate(self.drawn)
             taken = flat.take(np.flatnonzero(accept.take(flat % self.chains)))
-            proposal = self.proposal.reshape(-1)
-            self.current.reshape(-1).put(taken, proposal.take(taken))
+            self.current.reshape(-1).put(taken, self.proposal.reshape(-1).take(taken))
             self.stamp.reshape(-1).put(taken, self.counters["accepted"].take(taken % self.chains) + 1)
-            proposal.put(flat, np.nan)
+        self.clear()
+
+    def clear(self) -> None:
+        """Forget the proposal's numbers (at a cost of the numbers it drew, not of the whole state)."""
+        if self.drawn:
+            self.proposal.reshape(-1).put(np.concatenate(self.drawn), np.nan)
         self.drawn = []
 
     def load(self, rows: np.ndarray, numbers: np.ndarray) -> None:
@@ -279,10 +286,12 @@ class ChainStates:
         return np.take(self.proposal if proposal else self.current, rows, axis=1).T
 
     def set_proposal(self, column: int, values: np.ndarray) -> None:
-        """Set number ``column`` of every chain's proposal (e.g. film positions chosen by the bootstrap)."""
+        """Set number ``column`` of the proposals of chains 0 .. ``values.size`` - 1 (e.g. film positions chosen
+        by the bootstrap)."""
         if column >= self.width:
             self._grow(column + 1)
-        self.proposal[column] = values
+        self.proposal[column, :values.size] = values
+        self.drawn.append(column * self.chains + np.arange(values.size))
 
     def sampler(self, rows: np.ndarray, film: tuple[int, int] | None = None) -> "PrimarySampler":
         """A sampler serving the proposal's numbers to the lanes of chains ``rows``."""
