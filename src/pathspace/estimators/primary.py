@@ -8,7 +8,8 @@ the circle [0, 1) (a small step).  Both are symmetric, T(x -> y) = T(y -> x),
 so the acceptance is min(1, f(y) / f(x)).
 
 Numbers are materialised lazily, as pbrt-v3's MLTSampler does: a number
-is brought up to date only when the proposal draws it.  Each number keeps the
+is brought up to date only when a small step's proposal draws it (a large
+step's proposal does not depend on it).  Each number keeps the
 count of accepted proposals (``stamp``) when it was last brought up to date;
 since then, every accepted small step would have moved it by one step and an
 accepted large step would have replaced it.  Those moves never influenced
@@ -103,8 +104,7 @@ class SmallStep:
         # The steps of consecutive numbers are summed in chunks of at most CATCH_UP_CHUNK (a bounded memory).
         for first in range(0, total, CATCH_UP_CHUNK):
             last = min(first + CATCH_UP_CHUNK, total)
-            u = uniforms(2 * (last - first)).reshape(2, -1)
-            single = self.size * np.exp(-np.log(16.0) * u[0]) * np.where(u[1] < 0.5, -1.0, 1.0)
+            single = self._exponential(uniforms(2 * (last - first)).reshape(2, -1))
             if first == 0 and last == total:
                 out[moved] = single if total == moved.size else np.add.reduceat(single, ends - n)
                 break
@@ -113,6 +113,16 @@ class SmallStep:
             sums = np.bincount(owner - low, weights=single)
             out[moved[low:low + sums.size]] += sums
         return out
+
+    def single(self, count: int, uniforms: Uniforms) -> np.ndarray:
+        """``count`` independent single steps (a small step's move of each number), float64."""
+        if self.kernel == "gaussian":
+            return self.steps(np.ones(count, np.int64), uniforms)
+        return self._exponential(uniforms(2 * count).reshape(2, -1))
+
+    def _exponential(self, u: np.ndarray) -> np.ndarray:
+        """Exponential steps from uniforms u (2, n): magnitude from u[0], sign from u[1]."""
+        return self.size * np.exp(-np.log(16.0) * u[0]) * np.where(u[1] < 0.5, -1.0, 1.0)
 
     def pdf(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Density of one step from ``x`` to ``y`` on the circle (per coordinate; symmetric in x and y)."""
@@ -219,8 +229,25 @@ class ChainStates:
         return u
 
     def _propose(self, r: np.ndarray, flat: np.ndarray) -> np.ndarray:
-        """Bring the current numbers of chains ``r`` at ``flat`` (indices into the (width, chains) arrays) up to
-        date (see the module docstring), then propose from them."""
+        """The proposal's numbers at ``flat`` (indices into the (width, chains) arrays) of chains ``r``: fresh
+        uniforms for a large step; else the current numbers, brought up to date, moved by one small step."""
+        if self.replay:
+            return self._current(r, flat)
+        large = self.counters["large"].take(r)
+        if not large.any():
+            return _wrap(self._current(r, flat) + self.step.single(r.size, self.uniforms))
+        proposed = np.empty(r.size)
+        k = np.flatnonzero(large)
+        proposed[k] = self.uniforms(k.size)
+        k = np.flatnonzero(~large)
+        if k.size:
+            proposed[k] = _wrap(self._current(r.take(k), flat.take(k)) + self.step.single(k.size, self.uniforms))
+        return proposed
+
+    def _current(self, r: np.ndarray, flat: np.ndarray) -> np.ndarray:
+        """Bring the current numbers at ``flat`` of chains ``r`` up to date (see the module docstring) and store
+        them: a small step's proposal depends on them, so the chain must keep what it drew.  (A large step's
+        does not: its numbers stay as they were, and catch up when a later proposal uses them.)"""
         accepted, last_large = self.counters["accepted"].take(r), self.counters["last_large"].take(r)
         stamp, current = self.stamp.reshape(-1).take(flat), self.current.reshape(-1).take(flat)
         fresh = np.flatnonzero(stamp < last_large)      # replaced by an accepted large step since (or never drawn)
@@ -233,17 +260,7 @@ class ChainStates:
             current[lagging] = _wrap(moved)
         self.current.reshape(-1).put(flat, current)
         self.stamp.reshape(-1).put(flat, accepted)
-        if self.replay:
-            return current
-        large = self.counters["large"].take(r)
-        if not large.any():
-            return _wrap(current + self.step.steps(np.ones(r.size, np.int64), self.uniforms))
-        proposed = np.empty(r.size)
-        k = np.flatnonzero(large)
-        proposed[k] = self.uniforms(k.size)
-        k = np.flatnonzero(~large)
-        proposed[k] = _wrap(current.take(k) + self.step.steps(np.ones(k.size, np.int64), self.uniforms))
-        return proposed
+        return current
 
     def settle(self, accept: np.ndarray) -> None:
         """End the proposal: the chains ``accept`` (bool per chain) take its numbers, the others keep theirs.
