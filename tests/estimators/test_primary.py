@@ -205,7 +205,7 @@ class Toy(Target):
 def run_toy(step: SmallStep, p_large: float, chains: int, steps: int, seed: int):
     uniforms = uniforms_of(seed, (1 << 20,))   # the chains' stream, apart from the bootstrap's
     contribution = lambda values: values[1]   # noqa: E731
-    boot = bootstrap(Toy(), 1 << 16, chains, contribution, step, streams_of(seed), 3, Counters(), lambda: None)
+    boot = bootstrap(Toy(), 1 << 16, chains, contribution, step, streams_of(seed), Counters(), lambda: None)
     pixels = FILM[0] * FILM[1]
     chain = Chains(Toy(), contribution, step, p_large, uniforms, boot.label,
                    np.full(chains, pixels * boot.brightness[0] / chains), pixels, 3)
@@ -338,7 +338,7 @@ class Broken(Toy):
 def test_nonfinite_contributions_are_dropped_and_counted():
     uniforms, step, counters = uniforms_of(13, (1 << 20,)), SmallStep(), Counters()
     contribution = lambda values: values[1]   # noqa: E731
-    boot = bootstrap(Broken(), 4096, 256, contribution, step, streams_of(13), 3, counters, lambda: None)
+    boot = bootstrap(Broken(), 4096, 256, contribution, step, streams_of(13), counters, lambda: None)
     chain = Chains(Broken(), contribution, step, 0.3, uniforms, boot.label, np.ones(256), 64, 3)
     chain.start(boot.numbers, counters)
     image = np.zeros((3, 64))

@@ -7,6 +7,7 @@ import pytest
 
 import pathspace as ps
 from pathspace.experiment import EstimatorSpec, converge, default_checkpoints
+from pathspace.experiment.convergence import Convergence
 from conftest import scene_dict
 
 
@@ -53,6 +54,20 @@ def test_time_budgets_and_views(box):
     summary = result.summary()
     assert {"slope", "efficiency", "overhead_seconds"} <= set(summary.columns)
     assert np.all(summary["overhead_seconds"] < 0.2 * summary["seconds"])
+
+
+def test_equal_spp_views_skip_runs_without_passes():
+    """A time budget shorter than a pass leaves a run with no pass (spp 0): it has no curve to interpolate."""
+    import pandas as pd
+
+    table = pd.DataFrame({"estimator": ["pt", "pt", "lt"], "seed": [0, 0, 0], "spp": [2, 8, 0],
+                          "seconds": [0.1, 0.7, 0.6], "relmse": [0.4, 0.1, np.nan]})
+    at = Convergence(table, ("relmse",)).at(spp=4)
+    assert list(at.index) == ["pt"] and at["relmse"].iloc[0] == pytest.approx(0.2)
+    at = Convergence(table, ("relmse",)).at(seconds=0.6)
+    assert list(at.index) == ["pt"] and np.isfinite(at["relmse"]).all()
+    with pytest.raises(ValueError, match="spp: expected a number > 0"):
+        Convergence(table, ("relmse",)).at(spp=0)
 
 
 def test_specs_and_checkpoints():

@@ -88,7 +88,7 @@ class Strata:
 
 
 def bootstrap(target, samples: int, chains: int, contribution, step: SmallStep, streams: Callable[[tuple], Uniforms],
-              channels: int, counters: Counters, check: Callable[[], None], threads: int = 1) -> BootstrapResult:
+              counters: Counters, check: Callable[[], None], threads: int = 1) -> BootstrapResult:
     """Estimate every class's brightness from ``samples`` independent samples per class and draw the chains'
     starts (see the module docstring).  ``streams(key)`` supplies the random numbers: ``()`` those of the strata
     and the reservoirs, ``(class, batch)`` those of one batch of samples; batches are evaluated ``threads`` at a

@@ -69,7 +69,8 @@ __all__ = ["CONTRIBUTIONS", "Metropolis", "Proposal", "Target", "Chains", "Splat
            "contribution_function", "evaluate_target", "run_passes", "step_groups", "uniform_stream"]
 
 CONTRIBUTIONS = ("luminance", "xyz", "max")
-# Random streams of a render (the first number of each unit key); unit keys carry the class and batch.
+# Random streams of a render (the first number of each unit key); then the first pass, and the class and batch
+# (bootstrap) or the group (chains).
 _BOOTSTRAP, _CHAINS = 0, 1
 
 
@@ -297,7 +298,7 @@ class Metropolis(Estimator):
         try:
             boot = bootstrap(target, self.bootstrap, self.chains, contribution, step,
                              lambda key: uniform_stream(job, (_BOOTSTRAP, budget.first_pass) + key),
-                             film.channels, job.counters, control.check, job.threads)
+                             job.counters, control.check, job.threads)
         except Interrupted:
             return
         stats.update(bootstrap=boot.samples, brightness=float(boot.brightness.sum()),

@@ -74,11 +74,13 @@ class Convergence:
         if (seconds is None) == (spp is None):
             raise ValueError("give either seconds or spp")
         x, where = ("seconds", seconds) if seconds is not None else ("spp", spp)
+        if not where > 0:
+            raise ValueError(f"{x}: expected a number > 0 (the curves are interpolated in log-log), got {where!r}")
         pd = pandas()
         rows = []
         for (label, seed), run in self.table.groupby(["estimator", "seed"], sort=False):
-            run = run.sort_values(x)
-            if where < run[x].iloc[0] or where > run[x].iloc[-1]:
+            run = run[(run["spp"] > 0) & (run[x] > 0)].sort_values(x)   # no curve before a run's first pass
+            if run.empty or where < run[x].iloc[0] or where > run[x].iloc[-1]:
                 continue  # outside the run: no extrapolation
             value = np.exp(np.interp(np.log(where), np.log(run[x]), np.log(np.maximum(run[metric], 1e-300))))
             rows.append({"estimator": label, "seed": seed, metric: value})
