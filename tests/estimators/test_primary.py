@@ -205,7 +205,7 @@ class Toy(Target):
 def run_toy(step: SmallStep, p_large: float, chains: int, steps: int, seed: int):
     uniforms = uniforms_of(seed, (1 << 20,))   # the chains' stream, apart from the bootstrap's
     contribution = lambda values: values[1]   # noqa: E731
-    boot = bootstrap(Toy(), 1 << 16, chains, contribution, step, streams_of(seed), Counters(), lambda: None)
+    boot = bootstrap(Toy(), 1 << 16, chains, contribution, streams_of(seed), Counters())
     pixels = FILM[0] * FILM[1]
     chain = Chains(Toy(), contribution, step, p_large, uniforms, boot.label,
                    np.full(chains, pixels * boot.brightness[0] / chains), pixels, 3)
@@ -315,7 +315,7 @@ def test_fresh_states_serve_the_stream_s_uniforms_and_clear_what_they_drew():
     """The bootstrap's independent samples: numbers not given are the next uniforms of the stream, in the order
     they are asked for; clearing forgets every number drawn or given."""
     n, k = 64, 60
-    states = ChainStates(n, SmallStep(), uniforms_of(12), fresh=True)
+    states = ChainStates(n, None, uniforms_of(12), fresh=True)
     states.set_proposal(0, np.full(k, 0.5))
     rows, columns = np.repeat(np.arange(k), 40), np.tile(np.arange(40), k)   # past the stored width
     drawn = states.fetch(rows, columns).reshape(k, 40)
@@ -338,7 +338,7 @@ class Broken(Toy):
 def test_nonfinite_contributions_are_dropped_and_counted():
     uniforms, step, counters = uniforms_of(13, (1 << 20,)), SmallStep(), Counters()
     contribution = lambda values: values[1]   # noqa: E731
-    boot = bootstrap(Broken(), 4096, 256, contribution, step, streams_of(13), counters, lambda: None)
+    boot = bootstrap(Broken(), 4096, 256, contribution, streams_of(13), counters)
     chain = Chains(Broken(), contribution, step, 0.3, uniforms, boot.label, np.ones(256), 64, 3)
     chain.start(boot.numbers, counters)
     image = np.zeros((3, 64))

@@ -93,7 +93,7 @@ def test_lights_add_up():
 
 
 def test_time_budget_and_stats(cornell_small):
-    result = ps.render(cornell_small, time=0.5, seed=1)
+    result = ps.render(cornell_small, time=1.0, seed=1)   # passes even when pytest's workers share the cores
     s = result.stats
     assert s["spp"] >= 1 and np.all(result.film.count == s["spp"])
     assert s["samples"] == s["spp"] * 64 * 64

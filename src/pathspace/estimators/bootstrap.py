@@ -28,7 +28,8 @@ from typing import Callable
 import numpy as np
 
 from .base import Counters
-from .primary import ChainStates, SmallStep, Uniforms
+from .control import RenderControl
+from .primary import ChainStates, Uniforms
 from .workers import in_rounds
 
 __all__ = ["BATCH", "GROUPS", "BootstrapResult", "Strata", "allocate", "bootstrap", "reservoir_draw"]
@@ -87,25 +88,27 @@ class Strata:
         return pixel, np.stack([(pixel % width + x) / width, (pixel // width + y) / height]), group
 
 
-def bootstrap(target, samples: int, chains: int, contribution, step: SmallStep, streams: Callable[[tuple], Uniforms],
-              counters: Counters, check: Callable[[], None], threads: int = 1) -> BootstrapResult:
+def bootstrap(target, samples: int, chains: int, contribution, streams: Callable[[tuple], Uniforms],
+              counters: Counters, control: RenderControl | None = None, threads: int = 1) -> BootstrapResult:
     """Estimate every class's brightness from ``samples`` independent samples per class and draw the chains'
     starts (see the module docstring).  ``streams(key)`` supplies the random numbers: ``()`` those of the strata
     and the reservoirs, ``(class, batch)`` those of one batch of samples; batches are evaluated ``threads`` at a
-    time (the result does not depend on ``threads``)."""
+    time (the result does not depend on ``threads``), checking ``control`` (the render's brakes) before each."""
     from .metropolis import evaluate_target
 
     uniforms = streams(())
     strata = [Strata(target.film, samples, uniforms) for _ in range(target.classes)]
-    # One set of fresh states per batch evaluated at once (in_rounds takes `threads` consecutive batches), reused
-    # from round to round: cleared, they cost what a batch draws, where new ones would grow to its width anew.
-    workspaces = [{name: ChainStates(BATCH, step, uniforms, fresh=True) for name in target.streams}
-                  for _ in range(max(threads, 1))]
+    batches = [(label, start) for label in range(target.classes) for start in range(0, samples, BATCH)]
+    # One set of fresh states per batch of a round of in_rounds (`threads` consecutive batches), reused from round
+    # to round: cleared, they cost what a batch draws, where new ones would grow to its width anew.
+    workspaces = [{name: ChainStates(BATCH, None, uniforms, fresh=True) for name in target.streams}
+                  for _ in range(min(max(threads, 1), len(batches)))]
+    own = [Counters() for _ in batches]
 
-    def evaluate(batch: tuple[int, int, Uniforms, dict[str, ChainStates]]) -> tuple[np.ndarray, np.ndarray, Counters]:
-        label, start, draw, states = batch
-        check()
-        own = Counters()
+    def evaluate(batch: tuple[int, int, int, Uniforms, dict[str, ChainStates]]) -> tuple[np.ndarray, np.ndarray]:
+        k, label, start, draw, states = batch
+        if control is not None:
+            control.check()
         index = np.arange(start, min(start + BATCH, samples))
         for s in states.values():
             s.uniforms = draw
@@ -114,26 +117,28 @@ def bootstrap(target, samples: int, chains: int, contribution, step: SmallStep, 
             first = states[target.streams[0]]
             first.set_proposal(0, film[0])
             first.set_proposal(1, film[1])
-        _, f = evaluate_target(target, states, np.full(index.size, label), contribution, own)
-        return f, group, own
+        _, f = evaluate_target(target, states, np.full(index.size, label), contribution, own[k])
+        return f, group
 
     sums = np.zeros((target.classes, GROUPS + 1))      # per class and group (the last: the incomplete round)
     counts = np.zeros(GROUPS + 1)
     squares = np.zeros(target.classes)
     picks: list[dict] = [{"total": 0.0, "numbers": {}} for _ in range(target.classes)]
-    batches = [(label, start) for label in range(target.classes) for start in range(0, samples, BATCH)]
-    batches = [(label, start, streams((label, start // BATCH)), workspaces[k % len(workspaces)])
+    batches = [(k, label, start, streams((label, start // BATCH)), workspaces[k % len(workspaces)])
                for k, (label, start) in enumerate(batches)]
-    for (label, _, _, states), (f, group, own) in in_rounds(threads, evaluate, batches):
-        counters.merge(own)
-        slot = np.where(group < 0, GROUPS, group)
-        sums[label] += np.bincount(slot, weights=f, minlength=GROUPS + 1)
-        if label == 0:   # every class has the same strata
-            counts += np.bincount(slot, minlength=GROUPS + 1)
-        squares[label] += (f * f).sum()
-        _reservoir(picks[label], f, states, chains, uniforms)
-        for s in states.values():
-            s.clear()
+    try:
+        for (_, label, _, _, states), (f, group) in in_rounds(threads, evaluate, batches, control):
+            slot = np.where(group < 0, GROUPS, group)
+            sums[label] += np.bincount(slot, weights=f, minlength=GROUPS + 1)
+            if label == 0:   # every class has the same strata
+                counts += np.bincount(slot, minlength=GROUPS + 1)
+            squares[label] += (f * f).sum()
+            _reservoir(picks[label], f, states, chains, uniforms)
+            for s in states.values():
+                s.clear()
+    finally:   # what an interrupted bootstrap traced counts too
+        for c in own:
+            counters.merge(c)
     brightness = sums.sum(axis=1) / samples
     groups = np.flatnonzero(counts[:GROUPS] > 0)
     if groups.size >= 2:

@@ -63,7 +63,7 @@ from .base import Budget, Checkpoint, Counters, Estimator, RenderJob, parameter
 from .bootstrap import bootstrap
 from .control import Interrupted
 from .primary import KERNELS, ChainStates, SmallStep, advance, new_counters
-from .workers import in_parallel, split
+from .workers import in_parallel, in_rounds, split
 
 __all__ = ["CONTRIBUTIONS", "Metropolis", "Proposal", "Target", "Chains", "Splatting", "chain_statistics",
            "contribution_function", "evaluate_target", "run_passes", "step_groups", "uniform_stream"]
@@ -296,9 +296,9 @@ class Metropolis(Estimator):
         step = SmallStep(self.small_step, self.step_size)
         stats = job.stats.setdefault("metropolis", {})
         try:
-            boot = bootstrap(target, self.bootstrap, self.chains, contribution, step,
+            boot = bootstrap(target, self.bootstrap, self.chains, contribution,
                              lambda key: uniform_stream(job, (_BOOTSTRAP, budget.first_pass) + key),
-                             job.counters, control.check, job.threads)
+                             job.counters, control, job.threads)
         except Interrupted:
             return
         stats.update(bootstrap=boot.samples, brightness=float(boot.brightness.sum()),
@@ -315,13 +315,16 @@ class Metropolis(Estimator):
         groups = [Chains(target, contribution, step, self.p_large, uniform_stream(job, (_CHAINS, budget.first_pass, g)),
                          boot.label[part], scale[part], pixels, film.channels) for g, part in enumerate(parts)]
 
-        def start(g: int) -> Counters:
-            counters = Counters()
-            groups[g].start({name: numbers[parts[g]] for name, numbers in boot.numbers.items()}, counters)
-            return counters
+        counters = [Counters() for _ in groups]
 
-        for counters in in_parallel(job.threads, start, range(len(groups))):
-            job.counters.merge(counters)
+        def start(g: int) -> None:
+            groups[g].start({name: numbers[parts[g]] for name, numbers in boot.numbers.items()}, counters[g])
+
+        try:
+            in_parallel(job.threads, start, range(len(groups)), control)
+        finally:
+            for c in counters:
+                job.counters.merge(c)
         steps = -(-pixels // boot.label.size)
         started = control.elapsed()
         passes = run_passes(job, budget, on_checkpoint, lambda _: step_groups(job, groups, steps))
@@ -359,21 +362,25 @@ def run_passes(job: RenderJob, budget: Budget, on_checkpoint: Callable[[Checkpoi
 def step_groups(job: RenderJob, groups: Sequence[Splatting], steps: int) -> np.ndarray:
     """One pass of independent groups of chains (each with a ``step_all``) on the render's threads: ``steps``
     steps of every chain, then the splats still pending; the pass's image (C, pixels), summed over the groups in
-    their order."""
+    their order (a round of ``threads`` groups at a time, so that at most that many group images are held)."""
     film, control = job.film, job.control
+    counters = [Counters() for _ in groups]
 
-    def walk(chains) -> tuple[np.ndarray, Counters]:
-        image, counters = np.zeros((film.channels, film.pixel_count)), Counters()
+    def walk(g: int) -> np.ndarray:
+        image = np.zeros((film.channels, film.pixel_count))
         for _ in range(steps):
             control.check()
-            chains.step_all(image, counters)
-        chains.flush(image)
-        return image, counters
+            groups[g].step_all(image, counters[g])
+        groups[g].flush(image)
+        return image
 
     image = np.zeros((film.channels, film.pixel_count))
-    for part, counters in in_parallel(job.threads, walk, groups):
-        image += part
-        job.counters.merge(counters)
+    try:
+        for _, part in in_rounds(job.threads, walk, range(len(groups)), control):
+            image += part
+    finally:   # what an interrupted pass traced counts too
+        for c in counters:
+            job.counters.merge(c)
     return image / steps
 
 

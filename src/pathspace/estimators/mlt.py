@@ -48,7 +48,7 @@ from .base import Budget, Counters, Estimator, RenderJob, parameter
 from .bdpt import BDPT
 from .bidirectional import STREAMS
 from .bootstrap import BATCH, GROUPS, allocate, reservoir_draw
-from .control import Interrupted
+from .control import Interrupted, RenderControl
 from .metropolis import (CONTRIBUTIONS, Proposal, Splatting, chain_statistics, contribution_function, run_passes,
                          step_groups, uniform_stream)
 from .parameters import or_none
@@ -56,7 +56,7 @@ from . import path_mutations as mutations
 from .path_mutations import ADD_SPREAD, FreshPaths, Lengths, Proposed, fresh_paths
 from .paths import Paths, PathValues, Space
 from .primary import Uniforms
-from .workers import in_parallel, in_rounds, split
+from .workers import in_rounds, split
 
 __all__ = ["MLT", "PathChains"]
 
@@ -239,7 +239,7 @@ class MLT(Estimator):
             space = Space(job.scene, job.mode)
             boot = self._bootstrap(space, contribution,
                                    lambda key: uniform_stream(job, (_BOOTSTRAP, budget.first_pass) + key),
-                                   job.counters, control.check, job.threads)
+                                   job.counters, control, job.threads)
         except Interrupted:
             return
         direct = self.direct_estimator if job.scene.lights.count else None
@@ -273,22 +273,27 @@ class MLT(Estimator):
         pixels = job.film.pixel_count
         ranges = [(part, {name: job.samplers.open([(_DIRECT, pass_index, code, part.start)], [part.stop - part.start])
                           for name, code in STREAMS.items()}) for part in split(pixels)]
+        counters = [Counters() for _ in ranges]
 
-        def render_range(work: tuple[slice, dict]) -> tuple[np.ndarray, Counters]:
-            (part, samplers), counters = work, Counters()
+        def render_range(k: int) -> np.ndarray:
+            (part, samplers) = ranges[k]
             job.control.check()
             found = self.direct_estimator.evaluate(job.scene, np.arange(part.start, part.stop), samplers, job.mode,
-                                                   counters)
+                                                   counters[k])
             return np.stack([np.bincount(found.pixel, weights=found.weighted[c], minlength=pixels)
-                             for c in range(job.film.channels)]), counters
+                             for c in range(job.film.channels)])
 
         image = np.zeros((job.film.channels, pixels))
-        for part, counters in in_parallel(job.threads, render_range, ranges):
-            image += part
-            job.counters.merge(counters)
+        try:   # in rounds of `threads` ranges: at most that many images held
+            for _, part in in_rounds(job.threads, render_range, range(len(ranges)), job.control):
+                image += part
+        finally:
+            for c in counters:
+                job.counters.merge(c)
         return image
 
-    def _bootstrap(self, space: Space, contribution, streams, counters: Counters, check, threads: int) -> Bootstrap:
+    def _bootstrap(self, space: Space, contribution, streams, counters: Counters, control: RenderControl,
+                   threads: int) -> Bootstrap:
         """b_L with its standard error per path length, and the chains' starts (see the module docstring);
         ``streams(key)``: the random numbers of the reservoirs (key ``()``) and of each batch of walks (``(length,
         batch)``), whose walks are made ``threads`` batches at a time."""
@@ -298,7 +303,7 @@ class MLT(Estimator):
 
         def walk(batch: tuple[int, int, int, Uniforms]) -> tuple[FreshPaths, np.ndarray, int]:
             label, start, count, draw = batch
-            check()
+            control.check()
             fresh = fresh_paths(space, np.full(count, first + label), first + label + 1, draw)
             weighted = fresh.weights()
             c = contribution(weighted)
@@ -312,7 +317,7 @@ class MLT(Estimator):
                         for start in range(0, self.bootstrap, size)]
         sums = np.zeros((classes, GROUPS))
         reservoirs = [{"total": 0.0, "paths": None} for _ in range(classes)]
-        for (label, start, _, _), (fresh, c, nonfinite) in in_rounds(threads, walk, batches):
+        for (label, start, _, _), (fresh, c, nonfinite) in in_rounds(threads, walk, batches, control):
             counters.nonfinite_contributions += nonfinite
             sums[label] += np.bincount((start + fresh.pair) % GROUPS, weights=c, minlength=GROUPS)
             _keep(reservoirs[label], c, fresh.paths, self.chains, uniforms)

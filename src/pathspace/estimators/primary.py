@@ -175,15 +175,15 @@ class ChainStates:
     ``current`` (its value, up to date at ``stamp`` accepted proposals; -1:
     never drawn) and ``proposal`` (NaN until the proposal draws it).  With
     ``replay`` set, the proposal is the current state (numbers not drawn
-    before are drawn for both).  ``fresh`` states hold no chains, only
-    proposals of fresh uniforms (independent samples, as the bootstrap takes
-    them); :meth:`clear` readies them for the next batch.
+    before are drawn for both).  ``fresh`` states hold no chains (and need
+    no ``step``), only proposals of fresh uniforms (independent samples, as
+    the bootstrap takes them); :meth:`clear` readies them for the next batch.
     The chains' counters are shared by all streams of the chains: pass the
     same ``counters`` dict to each stream's ChainStates.
     """
 
-    def __init__(self, chains: int, step: SmallStep, uniforms: Uniforms, counters: dict[str, np.ndarray] | None = None,
-                 width: int = 16, fresh: bool = False) -> None:
+    def __init__(self, chains: int, step: SmallStep | None, uniforms: Uniforms,
+                 counters: dict[str, np.ndarray] | None = None, width: int = 16, fresh: bool = False) -> None:
         self.step, self.uniforms, self.fresh = step, uniforms, fresh
         self.counters = counters if counters is not None else new_counters(chains)
         # Numbers are stored number by number: (width, chains), so that a wavefront drawing number j of its

@@ -11,8 +11,10 @@ their inner loops, so the pieces run in parallel.
 """
 from __future__ import annotations
 
-from concurrent.futures import ThreadPoolExecutor
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from typing import Callable, Iterable, Iterator, Sequence, TypeVar
+
+from .control import Interrupted, RenderControl
 
 __all__ = ["PIECE", "in_parallel", "in_rounds", "split"]
 
@@ -33,26 +35,48 @@ def split(count: int, size: int = PIECE) -> list[slice]:
     return [slice(a, b) for a, b in zip(edges, edges[1:])]
 
 
-def in_parallel(threads: int, work: Callable[[T], R], items: Sequence[T]) -> list[R]:
+def in_parallel(threads: int, work: Callable[[T], R], items: Sequence[T],
+                control: RenderControl | None = None) -> list[R]:
     """``[work(item) for item in items]``, run on up to ``threads`` threads.
 
-    The first failure (or :class:`~pathspace.estimators.control.Interrupted`)
-    is raised once the calls already running have ended; calls not yet
-    started are dropped.
+    When a call fails, or the caller is interrupted while it waits (Ctrl-C),
+    ``control`` is cancelled so that the other calls stop at their next
+    check; once every call has ended, the first failure other than
+    :class:`~pathspace.estimators.control.Interrupted` is raised (a render
+    stopped by its deadline or a signal raises Interrupted).
     """
     if threads <= 1 or len(items) <= 1:
         return [work(item) for item in items]
     pool = ThreadPoolExecutor(min(threads, len(items)))
     try:
-        return list(pool.map(work, items))
+        futures = [pool.submit(work, item) for item in items]
+        wait(futures, return_when=FIRST_EXCEPTION)
+        failures = [f.exception() for f in futures if f.done() and f.exception() is not None]
+        errors = [e for e in failures if not isinstance(e, Interrupted)]
+        if errors and control is not None:
+            control.cancel(f"a worker failed: {errors[0]!r}")
+        wait(futures)
+    except BaseException:
+        if control is not None:
+            control.cancel("interrupted")
+        raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
+    failures = [f.exception() for f in futures if f.exception() is not None]
+    errors = [e for e in failures if not isinstance(e, Interrupted)]
+    if errors or failures:
+        raise (errors or failures)[0]
+    return [f.result() for f in futures]
 
 
-def in_rounds(threads: int, work: Callable[[T], R], items: Iterable[T]) -> Iterator[tuple[T, R]]:
-    """``(item, work(item))`` in item order, computed ``threads`` at a time (so that at most that many results,
-    e.g. a bootstrap batch's chain states, are held at once)."""
+def in_rounds(threads: int, work: Callable[[T], R], items: Iterable[T],
+              control: RenderControl | None = None) -> Iterator[tuple[T, R]]:
+    """``(item, work(item))`` in item order, computed in rounds of ``threads`` consecutive items by
+    :func:`in_parallel`.  A round starts only when the caller asks for its first result, so the caller has
+    consumed every result of the round before: at most ``threads`` results are held at once, and the items of a
+    round may share what the items of other rounds use (a bootstrap's reusable chain states)."""
     pending = list(items)
-    for first in range(0, len(pending), max(threads, 1)):
-        round_items = pending[first:first + max(threads, 1)]
-        yield from zip(round_items, in_parallel(threads, work, round_items))
+    size = max(threads, 1)
+    for first in range(0, len(pending), size):
+        round_items = pending[first:first + size]
+        yield from zip(round_items, in_parallel(threads, work, round_items, control))
