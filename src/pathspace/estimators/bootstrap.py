@@ -98,12 +98,12 @@ def bootstrap(target, samples: int, chains: int, contribution, streams: Callable
 
     uniforms = streams(())
     strata = [Strata(target.film, samples, uniforms) for _ in range(target.classes)]
-    batches = [(label, start) for label in range(target.classes) for start in range(0, samples, BATCH)]
+    batch_starts = [(label, start) for label in range(target.classes) for start in range(0, samples, BATCH)]
     # One set of fresh states per batch of a round of in_rounds (`threads` consecutive batches), reused from round
     # to round: cleared, they cost what a batch draws, where new ones would grow to its width anew.
     workspaces = [{name: ChainStates(BATCH, None, uniforms, fresh=True) for name in target.streams}
-                  for _ in range(min(max(threads, 1), len(batches)))]
-    own = [Counters() for _ in batches]
+                  for _ in range(min(max(threads, 1), len(batch_starts)))]
+    own = [Counters() for _ in batch_starts]
 
     def evaluate(batch: tuple[int, int, int, Uniforms, dict[str, ChainStates]]) -> tuple[np.ndarray, np.ndarray]:
         k, label, start, draw, states = batch
@@ -125,7 +125,7 @@ def bootstrap(target, samples: int, chains: int, contribution, streams: Callable
     squares = np.zeros(target.classes)
     picks: list[dict] = [{"total": 0.0, "numbers": {}} for _ in range(target.classes)]
     batches = [(k, label, start, streams((label, start // BATCH)), workspaces[k % len(workspaces)])
-               for k, (label, start) in enumerate(batches)]
+               for k, (label, start) in enumerate(batch_starts)]
     try:
         for (_, label, _, _, states), (f, group) in in_rounds(threads, evaluate, batches, control):
             slot = np.where(group < 0, GROUPS, group)

@@ -66,7 +66,7 @@ from .primary import KERNELS, ChainStates, SmallStep, advance, new_counters
 from .workers import in_parallel, in_rounds, split
 
 __all__ = ["CONTRIBUTIONS", "Metropolis", "Proposal", "Target", "Chains", "Splatting", "chain_statistics",
-           "contribution_function", "evaluate_target", "run_passes", "step_groups", "uniform_stream"]
+           "contribution_function", "evaluate_target", "run_passes", "step_groups", "summed_images", "uniform_stream"]
 
 CONTRIBUTIONS = ("luminance", "xyz", "max")
 # Random streams of a render (the first number of each unit key); then the first pass, and the class and batch
@@ -359,29 +359,34 @@ def run_passes(job: RenderJob, budget: Budget, on_checkpoint: Callable[[Checkpoi
     return passes
 
 
+def summed_images(job: RenderJob, pieces: int, render: Callable[[int, Counters], np.ndarray]) -> np.ndarray:
+    """The sum, in piece order, of the images (C, pixels) ``render(k, counters)`` of pieces k = 0 .. ``pieces`` - 1,
+    made on the render's threads a round of ``threads`` pieces at a time (so that at most that many images are
+    held); what the pieces count joins ``job.counters``, also when the render is interrupted."""
+    counters = [Counters() for _ in range(pieces)]
+    image = np.zeros((job.film.channels, job.film.pixel_count))
+    try:
+        for _, part in in_rounds(job.threads, lambda k: render(k, counters[k]), range(pieces), job.control):
+            image += part
+    finally:
+        for c in counters:
+            job.counters.merge(c)
+    return image
+
+
 def step_groups(job: RenderJob, groups: Sequence[Splatting], steps: int) -> np.ndarray:
     """One pass of independent groups of chains (each with a ``step_all``) on the render's threads: ``steps``
     steps of every chain, then the splats still pending; the pass's image (C, pixels), summed over the groups in
-    their order (a round of ``threads`` groups at a time, so that at most that many group images are held)."""
-    film, control = job.film, job.control
-    counters = [Counters() for _ in groups]
-
-    def walk(g: int) -> np.ndarray:
-        image = np.zeros((film.channels, film.pixel_count))
+    their order."""
+    def walk(g: int, counters: Counters) -> np.ndarray:
+        image = np.zeros((job.film.channels, job.film.pixel_count))
         for _ in range(steps):
-            control.check()
-            groups[g].step_all(image, counters[g])
+            job.control.check()
+            groups[g].step_all(image, counters)
         groups[g].flush(image)
         return image
 
-    image = np.zeros((film.channels, film.pixel_count))
-    try:
-        for _, part in in_rounds(job.threads, walk, range(len(groups)), control):
-            image += part
-    finally:   # what an interrupted pass traced counts too
-        for c in counters:
-            job.counters.merge(c)
-    return image / steps
+    return summed_images(job, len(groups), walk) / steps
 
 
 def chain_statistics(groups: Sequence[Splatting], per_class: np.ndarray, passes: int, steps: int,

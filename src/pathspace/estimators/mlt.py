@@ -50,7 +50,7 @@ from .bidirectional import STREAMS
 from .bootstrap import BATCH, GROUPS, allocate, reservoir_draw
 from .control import Interrupted, RenderControl
 from .metropolis import (CONTRIBUTIONS, Proposal, Splatting, chain_statistics, contribution_function, run_passes,
-                         step_groups, uniform_stream)
+                         step_groups, summed_images, uniform_stream)
 from .parameters import or_none
 from . import path_mutations as mutations
 from .path_mutations import ADD_SPREAD, FreshPaths, Lengths, Proposed, fresh_paths
@@ -273,24 +273,16 @@ class MLT(Estimator):
         pixels = job.film.pixel_count
         ranges = [(part, {name: job.samplers.open([(_DIRECT, pass_index, code, part.start)], [part.stop - part.start])
                           for name, code in STREAMS.items()}) for part in split(pixels)]
-        counters = [Counters() for _ in ranges]
 
-        def render_range(k: int) -> np.ndarray:
-            (part, samplers) = ranges[k]
+        def render_range(k: int, counters: Counters) -> np.ndarray:
+            part, samplers = ranges[k]
             job.control.check()
             found = self.direct_estimator.evaluate(job.scene, np.arange(part.start, part.stop), samplers, job.mode,
-                                                   counters[k])
+                                                   counters)
             return np.stack([np.bincount(found.pixel, weights=found.weighted[c], minlength=pixels)
                              for c in range(job.film.channels)])
 
-        image = np.zeros((job.film.channels, pixels))
-        try:   # in rounds of `threads` ranges: at most that many images held
-            for _, part in in_rounds(job.threads, render_range, range(len(ranges)), job.control):
-                image += part
-        finally:
-            for c in counters:
-                job.counters.merge(c)
-        return image
+        return summed_images(job, len(ranges), render_range)
 
     def _bootstrap(self, space: Space, contribution, streams, counters: Counters, control: RenderControl,
                    threads: int) -> Bootstrap:
