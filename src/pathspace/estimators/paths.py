@@ -26,7 +26,14 @@ Dirac deltas of f and of the densities cancel, so a specular vertex's
 "BSDF" is its lobe's weight times the lobe's probability and its "density"
 is the lobe's probability (as :meth:`pathspace.bsdfs.MaterialLanes.sample`
 reports them); ratios of f and of densities of paths with the same specular
-vertices are then exact.  Edges are assumed unoccluded: whoever builds a
+vertices are then exact.  The deltas must be over the same measure to
+cancel: f's and ``rev``'s are over the solid angle of the direction toward
+the light (the one a walk from the camera samples), a walk from the light
+samples the direction toward the camera.  A reflection maps the two
+directions with Jacobian 1; a refraction, by Snell's law
+(eta_i^2 cos_i dw_i = eta_t^2 cos_t dw_t; Veach 1997, sec. 5.2), with
+dw_prev / dw_next = cos_next / (eta^2 cos_prev), eta = eta_prev / eta_next,
+so ``fwd`` at the vertex after a refraction carries that factor.  Edges are assumed unoccluded: whoever builds a
 path traces or tests every segment it makes.
 
 In spectral renders (:class:`Space` with a spectral mode) a path's
@@ -168,11 +175,12 @@ class PathValues:
 
 
 def delta_lobe(materials: MaterialLanes, surface: Surface, toward: np.ndarray, mode: str):
-    """(f |cos| (C, n), probability (n,), terminated (n,)) of the delta lobe of each lane's specular material that
-    scatters light seen as ``surface`` toward unit ``toward`` (3, n): the lobe's weight times its probability,
-    its probability (zero where no lobe goes there), and whether it kept only the hero wavelength (dispersion)."""
+    """(f |cos| (C, n), probability (n,), eta (n,), terminated (n,)) of the delta lobe of each lane's specular
+    material that scatters light seen as ``surface`` toward unit ``toward`` (3, n): the lobe's weight times its
+    probability, its probability (zero where no lobe goes there), the relative index eta_t / eta_i it crosses
+    toward ``toward`` (1 where it reflects), and whether it kept only the hero wavelength (dispersion)."""
     count = toward.shape[1]
-    f_cos, probability = np.zeros((materials.channels, count)), np.zeros(count)
+    f_cos, probability, eta = np.zeros((materials.channels, count)), np.zeros(count), np.ones(count)
     terminated = np.zeros(count, bool)
     for first in _LOBE_NUMBERS:
         u = np.vstack((np.full(count, first), np.full((2, count), 0.5)))
@@ -180,16 +188,19 @@ def delta_lobe(materials: MaterialLanes, surface: Surface, toward: np.ndarray, m
         match = (dot(sample.wi.astype(np.float64), toward) > SAME_DIRECTION) & (sample.pdf > 0)
         f_cos = np.where(match, sample.weight * sample.pdf, f_cos)
         probability = np.where(match, sample.pdf, probability)
+        if sample.eta is not None:
+            eta = np.where(match, sample.eta, eta)
         if sample.terminated is not None:
             terminated |= match & sample.terminated
-    return f_cos, probability, terminated
+    return f_cos, probability, eta, terminated
 
 
 def _scattering(scene, colours, material: np.ndarray, n: np.ndarray, to_prev: np.ndarray, to_next: np.ndarray):
     """At surface vertices with ``material`` and normals ``n`` (3, n) and ``colours``, neighbours along unit
     ``to_prev`` (toward the light end) and ``to_next`` (toward the camera): (f_s |cos toward prev| (C, n) for
     light arriving from prev, density of sampling ``to_prev`` from the camera side, density of sampling
-    ``to_next`` from the light side, specular, kept only the hero wavelength)."""
+    ``to_next`` from the light side (for a delta lobe, over f's measure), specular, kept only the hero
+    wavelength)."""
     table = scene.materials
     materials = MaterialLanes(table, material, colours, OPTIONS)
     delta = table.delta.take(material)
@@ -201,10 +212,15 @@ def _scattering(scene, colours, material: np.ndarray, n: np.ndarray, to_prev: np
     if delta.any():
         d = np.flatnonzero(delta)
         specular = MaterialLanes(table, material.take(d), colours.take(d), OPTIONS)
-        lobe_f, lobe_prev, terminated[d] = delta_lobe(specular, from_camera.take(d), np.take(to_prev, d, axis=1),
-                                                      "radiance")
-        _, lobe_next, _ = delta_lobe(specular, from_light.take(d), np.take(to_next, d, axis=1), "importance")
-        f_cos[:, d], pdf_prev[d], pdf_next[d] = lobe_f, lobe_prev, lobe_next
+        prev, following = np.take(to_prev, d, axis=1), np.take(to_next, d, axis=1)
+        lobe_f, lobe_prev, eta, terminated[d] = delta_lobe(specular, from_camera.take(d), prev, "radiance")
+        _, lobe_next, _, _ = delta_lobe(specular, from_light.take(d), following, "importance")
+        # The light walk's delta over the solid angle toward the camera, taken to f's (see the module docstring).
+        normal = np.take(n, d, axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            next_density = lobe_next * np.abs(dot(normal, following)) / (eta * eta * np.abs(dot(normal, prev)))
+        f_cos[:, d], pdf_prev[d] = lobe_f, lobe_prev
+        pdf_next[d] = np.where((lobe_next > 0) & np.isfinite(next_density), next_density, 0.0)
     return f_cos, pdf_prev, pdf_next, delta, terminated
 
 
