@@ -26,15 +26,15 @@ Dirac deltas of f and of the densities cancel, so a specular vertex's
 "BSDF" is its lobe's weight times the lobe's probability and its "density"
 is the lobe's probability (as :meth:`pathspace.bsdfs.MaterialLanes.sample`
 reports them); ratios of f and of densities of paths with the same specular
-vertices are then exact.  The deltas must be over the same measure to
-cancel: f's and ``rev``'s are over the solid angle of the direction toward
-the light (the one a walk from the camera samples), a walk from the light
-samples the direction toward the camera.  A reflection maps the two
-directions with Jacobian 1; a refraction, by Snell's law
-(eta_i^2 cos_i dw_i = eta_t^2 cos_t dw_t; Veach 1997, sec. 5.2), with
-dw_prev / dw_next = cos_next / (eta^2 cos_prev), eta = eta_prev / eta_next,
-so ``fwd`` at the vertex after a refraction carries that factor.  Edges are assumed unoccluded: whoever builds a
-path traces or tests every segment it makes.
+vertices are then exact.  The deltas cancel only over one measure: f's and
+``rev``'s are over the solid angle of the direction toward the light (the
+one a walk from the camera samples), while a walk from the light samples
+the direction toward the camera.  A reflection maps the two directions with
+Jacobian 1; a refraction, by Snell's law (eta_i^2 cos_i dw_i =
+eta_t^2 cos_t dw_t; Veach 1997, sec. 5.2), with dw_prev / dw_next =
+cos_next / (eta^2 cos_prev), eta = eta_prev / eta_next, so ``fwd`` at the
+vertex after a refraction carries that factor.  Edges are assumed
+unoccluded: whoever builds a path traces or tests every segment it makes.
 
 In spectral renders (:class:`Space` with a spectral mode) a path's
 wavelengths are drawn from its ``wavelength_number``; f is evaluated at them
