@@ -537,7 +537,8 @@ def caustic_toward(space: Space, x: Paths, xv: PathValues, direction: np.ndarray
 def _jacobian(values: PathValues, k: np.ndarray, low: np.ndarray, high: np.ndarray, side: str) -> np.ndarray:
     """The area density of vertices low .. high - 1 given the perturbed film position (``"rev"``: the camera's
     density at x_{k-1}, then the geometry factors behind specular vertices) or direction (``"fwd"``: geometry
-    factors only)."""
+    factors only, with Snell's Jacobian after each refraction, which a walk from the light needs to be in f's
+    measure; see :mod:`pathspace.estimators.paths`)."""
     slot = np.arange(values.fwd.shape[1])[None, :]
     factor = values.g_rev if side == "rev" else values.g_fwd
     if side == "rev":

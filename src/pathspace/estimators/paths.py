@@ -32,9 +32,10 @@ one a walk from the camera samples), while a walk from the light samples
 the direction toward the camera.  A reflection maps the two directions with
 Jacobian 1; a refraction, by Snell's law (eta_i^2 cos_i dw_i =
 eta_t^2 cos_t dw_t; Veach 1997, sec. 5.2), with dw_prev / dw_next =
-cos_next / (eta^2 cos_prev), eta = eta_prev / eta_next, so ``fwd`` at the
-vertex after a refraction carries that factor.  Edges are assumed
-unoccluded: whoever builds a path traces or tests every segment it makes.
+cos_next / (eta^2 cos_prev), eta = eta_prev / eta_next, so ``g_fwd`` (and
+with it ``fwd``) at the vertex after a refraction carries that factor.
+Edges are assumed unoccluded: whoever builds a path traces or tests every
+segment it makes.
 
 In spectral renders (:class:`Space` with a spectral mode) a path's
 wavelengths are drawn from its ``wavelength_number``; f is evaluated at them
@@ -145,8 +146,9 @@ class Paths:
 class PathValues:
     """What :func:`evaluate` finds: ``f`` (C, N) film contribution (0 for impossible paths), ``raster`` (2, N)
     film position, ``pixel`` (N,), per vertex slot (N, K) ``fwd`` and ``rev`` area densities (see the module
-    docstring), ``delta`` (specular vertices), ``g_fwd`` |cos_i| / d^2 of segment i-1 and ``g_rev`` |cos_i| / d^2
-    of segment i (what turns a solid-angle density at the neighbour into an area density at x_i)."""
+    docstring), ``delta`` (specular vertices), ``g_fwd`` |cos_i| / d^2 of segment i-1 (times Snell's Jacobian of
+    a refraction at x_{i-1}, see the module docstring) and ``g_rev`` |cos_i| / d^2 of segment i: what turns a
+    solid-angle density at the neighbour into an area density at x_i, in f's measure."""
 
     f: np.ndarray
     raster: np.ndarray
@@ -199,12 +201,14 @@ def _scattering(scene, colours, material: np.ndarray, n: np.ndarray, to_prev: np
     """At surface vertices with ``material`` and normals ``n`` (3, n) and ``colours``, neighbours along unit
     ``to_prev`` (toward the light end) and ``to_next`` (toward the camera): (f_s |cos toward prev| (C, n) for
     light arriving from prev, density of sampling ``to_prev`` from the camera side, density of sampling
-    ``to_next`` from the light side (for a delta lobe, over f's measure), specular, kept only the hero
-    wavelength)."""
+    ``to_next`` from the light side, the Jacobian d w_prev / d w_next that takes a delta lobe's density from
+    the light side to f's measure (1 but for refractions; see the module docstring), specular, kept only the
+    hero wavelength)."""
     table = scene.materials
     materials = MaterialLanes(table, material, colours, OPTIONS)
     delta = table.delta.take(material)
     terminated = np.zeros(material.size, bool)
+    snell = np.ones(material.size)
     from_camera = Surface.facing(n, -to_next)   # a walk from the camera arrives from the next vertex
     from_light = Surface.facing(n, -to_prev)    # a walk from the light arrives from the previous one
     f_cos, pdf_prev = materials.eval(from_camera, to_prev.astype(np.float32))
@@ -215,13 +219,12 @@ def _scattering(scene, colours, material: np.ndarray, n: np.ndarray, to_prev: np
         prev, following = np.take(to_prev, d, axis=1), np.take(to_next, d, axis=1)
         lobe_f, lobe_prev, eta, terminated[d] = delta_lobe(specular, from_camera.take(d), prev, "radiance")
         _, lobe_next, _, _ = delta_lobe(specular, from_light.take(d), following, "importance")
-        # The light walk's delta over the solid angle toward the camera, taken to f's (see the module docstring).
+        f_cos[:, d], pdf_prev[d], pdf_next[d] = lobe_f, lobe_prev, lobe_next
         normal = np.take(n, d, axis=1)
         with np.errstate(divide="ignore", invalid="ignore"):
-            next_density = lobe_next * np.abs(dot(normal, following)) / (eta * eta * np.abs(dot(normal, prev)))
-        f_cos[:, d], pdf_prev[d] = lobe_f, lobe_prev
-        pdf_next[d] = np.where((lobe_next > 0) & np.isfinite(next_density), next_density, 0.0)
-    return f_cos, pdf_prev, pdf_next, delta, terminated
+            jacobian = np.abs(dot(normal, following)) / (eta * eta * np.abs(dot(normal, prev)))
+        snell[d] = np.where(eta == 1.0, 1.0, np.where(np.isfinite(jacobian), jacobian, 0.0))
+    return f_cos, pdf_prev, pdf_next, snell, delta, terminated
 
 
 def evaluate(space: Space, paths: Paths) -> PathValues:
@@ -261,7 +264,7 @@ def evaluate(space: Space, paths: Paths) -> PathValues:
     row, col = np.nonzero((np.arange(slots)[None, :] >= 1) & (np.arange(slots)[None, :] < k[:, None]))
     terminated = np.zeros(count, bool)
     if row.size:
-        f_cos, pdf_prev, pdf_next, specular, dispersed = _scattering(
+        f_cos, pdf_prev, pdf_next, snell, specular, dispersed = _scattering(
             scene, colours.take(row), paths.material[row, col], paths.n[:, row, col], -w[:, row, col - 1],
             w[:, row, col])
         terminated[row[dispersed]] = True
@@ -270,6 +273,7 @@ def evaluate(space: Space, paths: Paths) -> PathValues:
         f *= factor.prod(axis=2)
         rev[row, col - 1] = pdf_prev * g_rev[row, col - 1]
         nxt = col + 1 < k[row]
+        g_fwd[row[nxt], col[nxt] + 1] *= snell[nxt]
         fwd[row[nxt], col[nxt] + 1] = pdf_next[nxt] * g_fwd[row[nxt], col[nxt] + 1]
         delta[row, col] = specular
     # Segments and the camera.
