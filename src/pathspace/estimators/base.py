@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import dataclasses
 from abc import ABC, abstractmethod
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any, Callable, ClassVar, Iterator
 
@@ -38,7 +39,7 @@ from ..sampler import SamplerSource
 from .control import RenderControl
 
 __all__ = ["TILE_PIXELS", "Budget", "Checkpoint", "Counters", "Estimator", "ItemResult", "RenderJob", "Splats",
-           "WorkItem", "parameter"]
+           "WorkItem", "counted", "parameter"]
 
 # Wavefronts hold at most about this many paths: large enough to amortise Python's per-operation overhead,
 # small enough for the arrays to stay in cache (measured fastest on the Cornell box among 2**14 .. 2**18).
@@ -113,6 +114,18 @@ class Counters:
         self.truncated += other.truncated
         self.longest = max(self.longest, other.longest)
         self.nonfinite_contributions += other.nonfinite_contributions
+
+
+@contextmanager
+def counted(into: Counters, pieces: int) -> Iterator[list[Counters]]:
+    """One :class:`Counters` per piece of work, merged into ``into`` when the block ends -- also when an
+    interruption ends it, so that what the pieces traced counts."""
+    own = [Counters() for _ in range(pieces)]
+    try:
+        yield own
+    finally:
+        for c in own:
+            into.merge(c)
 
 
 @dataclass

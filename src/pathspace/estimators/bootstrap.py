@@ -27,7 +27,7 @@ from typing import Callable
 
 import numpy as np
 
-from .base import Counters
+from .base import Counters, counted
 from .control import RenderControl
 from .primary import ChainStates, Uniforms
 from .workers import in_rounds
@@ -103,10 +103,9 @@ def bootstrap(target, samples: int, chains: int, contribution, streams: Callable
     # to round: cleared, they cost what a batch draws, where new ones would grow to its width anew.
     workspaces = [{name: ChainStates(BATCH, None, uniforms, fresh=True) for name in target.streams}
                   for _ in range(min(max(threads, 1), len(batch_starts)))]
-    own = [Counters() for _ in batch_starts]
 
-    def evaluate(batch: tuple[int, int, int, Uniforms, dict[str, ChainStates]]) -> tuple[np.ndarray, np.ndarray]:
-        k, label, start, draw, states = batch
+    def evaluate(batch: tuple[Counters, int, int, Uniforms, dict[str, ChainStates]]) -> tuple[np.ndarray, np.ndarray]:
+        own, label, start, draw, states = batch
         if control is not None:
             control.check()
         index = np.arange(start, min(start + BATCH, samples))
@@ -117,16 +116,16 @@ def bootstrap(target, samples: int, chains: int, contribution, streams: Callable
             first = states[target.streams[0]]
             first.set_proposal(0, film[0])
             first.set_proposal(1, film[1])
-        _, f = evaluate_target(target, states, np.full(index.size, label), contribution, own[k])
+        _, f = evaluate_target(target, states, np.full(index.size, label), contribution, own)
         return f, group
 
     sums = np.zeros((target.classes, GROUPS + 1))      # per class and group (the last: the incomplete round)
     counts = np.zeros(GROUPS + 1)
     squares = np.zeros(target.classes)
     picks: list[dict] = [{"total": 0.0, "numbers": {}} for _ in range(target.classes)]
-    batches = [(k, label, start, streams((label, start // BATCH)), workspaces[k % len(workspaces)])
-               for k, (label, start) in enumerate(batch_starts)]
-    try:
+    with counted(counters, len(batch_starts)) as own:   # what an interrupted bootstrap traced counts too
+        batches = [(own[k], label, start, streams((label, start // BATCH)), workspaces[k % len(workspaces)])
+                   for k, (label, start) in enumerate(batch_starts)]
         for (_, label, _, _, states), (f, group) in in_rounds(threads, evaluate, batches, control):
             slot = np.where(group < 0, GROUPS, group)
             sums[label] += np.bincount(slot, weights=f, minlength=GROUPS + 1)
@@ -136,9 +135,6 @@ def bootstrap(target, samples: int, chains: int, contribution, streams: Callable
             _reservoir(picks[label], f, states, chains, uniforms)
             for s in states.values():
                 s.clear()
-    finally:   # what an interrupted bootstrap traced counts too
-        for c in own:
-            counters.merge(c)
     brightness = sums.sum(axis=1) / samples
     groups = np.flatnonzero(counts[:GROUPS] > 0)
     if groups.size >= 2:

@@ -59,7 +59,7 @@ from typing import Callable, ClassVar, Sequence
 import numpy as np
 
 from ..checks import choice, integer, number
-from .base import Budget, Checkpoint, Counters, Estimator, RenderJob, parameter
+from .base import Budget, Checkpoint, Counters, Estimator, RenderJob, counted, parameter
 from .bootstrap import bootstrap
 from .control import Interrupted
 from .primary import KERNELS, ChainStates, SmallStep, advance, new_counters
@@ -315,16 +315,11 @@ class Metropolis(Estimator):
         groups = [Chains(target, contribution, step, self.p_large, uniform_stream(job, (_CHAINS, budget.first_pass, g)),
                          boot.label[part], scale[part], pixels, film.channels) for g, part in enumerate(parts)]
 
-        counters = [Counters() for _ in groups]
+        with counted(job.counters, len(groups)) as counters:
+            def start(g: int) -> None:
+                groups[g].start({name: numbers[parts[g]] for name, numbers in boot.numbers.items()}, counters[g])
 
-        def start(g: int) -> None:
-            groups[g].start({name: numbers[parts[g]] for name, numbers in boot.numbers.items()}, counters[g])
-
-        try:
             in_parallel(job.threads, start, range(len(groups)), control)
-        finally:
-            for c in counters:
-                job.counters.merge(c)
         steps = -(-pixels // boot.label.size)
         started = control.elapsed()
         passes = run_passes(job, budget, on_checkpoint, lambda _: step_groups(job, groups, steps))
@@ -363,14 +358,10 @@ def summed_images(job: RenderJob, pieces: int, render: Callable[[int, Counters],
     """The sum, in piece order, of the images (C, pixels) ``render(k, counters)`` of pieces k = 0 .. ``pieces`` - 1,
     made on the render's threads a round of ``threads`` pieces at a time (so that at most that many images are
     held); what the pieces count joins ``job.counters``, also when the render is interrupted."""
-    counters = [Counters() for _ in range(pieces)]
     image = np.zeros((job.film.channels, job.film.pixel_count))
-    try:
+    with counted(job.counters, pieces) as counters:
         for _, part in in_rounds(job.threads, lambda k: render(k, counters[k]), range(pieces), job.control):
             image += part
-    finally:
-        for c in counters:
-            job.counters.merge(c)
     return image
 
 

@@ -63,9 +63,8 @@ def in_parallel(threads: int, work: Callable[[T], R], items: Sequence[T],
     finally:
         pool.shutdown(wait=True, cancel_futures=True)
     failures = [f.exception() for f in futures if f.exception() is not None]
-    errors = [e for e in failures if not isinstance(e, Interrupted)]
-    if errors or failures:
-        raise (errors or failures)[0]
+    if failures:
+        raise next((e for e in failures if not isinstance(e, Interrupted)), failures[0])
     return [f.result() for f in futures]
 
 
