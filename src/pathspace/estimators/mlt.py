@@ -49,8 +49,8 @@ from .bdpt import BDPT
 from .bidirectional import STREAMS
 from .bootstrap import BATCH, GROUPS, allocate, reservoir_draw
 from .control import Interrupted, RenderControl
-from .metropolis import (CONTRIBUTIONS, Proposal, Splatting, chain_statistics, contribution_function, run_passes,
-                         step_groups, summed_images, uniform_stream)
+from .metropolis import (CHAINS, CONTRIBUTIONS, Proposal, Splatting, chain_statistics, contribution_function,
+                         run_passes, step_groups, summed_images, uniform_stream)
 from .parameters import or_none
 from . import path_mutations as mutations
 from .path_mutations import ADD_SPREAD, FreshPaths, Lengths, Proposed, fresh_paths
@@ -164,8 +164,8 @@ class MLT(Estimator):
                                          "by the chains (Veach's direct lighting, extended); default: 4, or "
                                          "max_depth - 1 if smaller; 0: the chains render every length",
                                    or_none(partial(integer, low=0)))
-    chains: int = parameter(16384, "Markov chains, stepped in groups of at most 16384 (one wavefront each) on the "
-                                   "render's threads", partial(integer, low=1))
+    chains: int = parameter(CHAINS, "Markov chains, stepped in groups of at most 16384 (one wavefront each) on the "
+                                    "render's threads", partial(integer, low=1))
     bootstrap: int = parameter(1 << 14, "independent samples per path length (pairs of a light and a camera "
                                         "walk, joined in every way) that estimate its brightness and the chains' "
                                         "starting paths", partial(integer, low=1))
