@@ -76,7 +76,7 @@ CONTRIBUTIONS = ("luminance", "xyz", "max")
 # - MMLT: 1.1-1.2x lower;
 # - path-space MLT: 1.2-1.5x lower on the ajar door, 7% higher on the caustic scene.
 # 4096 chains were no better.  65536 chains doubled the mutations per second on two threads, yet gave 1.3-2.3x
-# higher relMSE (README, "Chain count").
+# higher relMSE (path-space MLT on the caustic scene: the same; README, "Chain count").
 CHAINS = 8192
 # Random streams of a render (the first number of each unit key); then the first pass, and the class and batch
 # (bootstrap) or the group (chains).
@@ -124,7 +124,8 @@ def contribution_function(kind: str, mode) -> Callable[[np.ndarray], np.ndarray]
 
 
 def evaluate_target(target: Target, states: dict[str, ChainStates], label: np.ndarray,
-                    contribution: Callable[[np.ndarray], np.ndarray], counters: Counters) -> tuple[Proposal, np.ndarray]:
+                    contribution: Callable[[np.ndarray], np.ndarray],
+                    counters: Counters) -> tuple[Proposal, np.ndarray]:
     """The contributions of the proposals of chains 0 .. ``label.size`` - 1 (of classes ``label``) in ``states``,
     and their scalar contributions f (per chain); contributions with a NaN or Inf are dropped and counted."""
     proposal = target.evaluate(states, np.arange(label.size), label, counters)
