@@ -172,10 +172,8 @@ def test_caustic_perturbation_through_a_refraction_keeps_the_target(light_enters
     edges = np.quantile(cosines(x), [0.25, 0.5, 0.75])
     before, after = (np.eye(4)[np.searchsorted(edges, cosines(paths))].T for paths in (x, proposed.paths))
     change = weight * accept * np.where(moved, after - before, 0.0)
-    per_pair = np.stack([np.bincount(pair, weights=row, minlength=fresh.pair.max() + 1) for row in change])
-    mean, covariance = per_pair.mean(axis=1), np.cov(per_pair) / per_pair.shape[1]
-    rank = np.linalg.matrix_rank(covariance)
-    assert stats.chi2.sf(float(mean @ np.linalg.pinv(covariance) @ mean), rank) > ALPHA
+    chi2, rank = mean_change_chi2(change, pair, int(fresh.pair.max()) + 1)
+    assert stats.chi2.sf(chi2, rank) > ALPHA
 
 
 def test_paths_know_their_densities():
@@ -298,7 +296,14 @@ def stationarity_chi2(name: str, wrong=None) -> tuple[float, int]:
     d = np.zeros((2 * top, keep.size))
     d[:, made] = (w * a)[made] * (indicators(proposed.paths.k[made], proposed.values.raster[:, made])
                                   - indicators(x.k[made], xv.raster[:, made]))
-    per_pair = np.stack([np.bincount(pair, weights=row, minlength=pairs) for row in d])   # pairs are independent
+    return mean_change_chi2(d, pair, pairs)
+
+
+def mean_change_chi2(change: np.ndarray, pair: np.ndarray, pairs: int) -> tuple[float, int]:
+    """Chi-square, against 0, of the mean change per independent pair of walks: ``change`` (G, n) of n paths made
+    by the pairs ``pair`` (n,) of ``pairs``, summed per pair (a pair's paths are correlated, the pairs are not);
+    the pseudo-inverse of the means' covariance, and its rank."""
+    per_pair = np.stack([np.bincount(pair, weights=row, minlength=pairs) for row in change])
     mean = per_pair.mean(axis=1)
     covariance = np.cov(per_pair) / pairs
     rank = np.linalg.matrix_rank(covariance)
@@ -413,7 +418,8 @@ def test_perturbations_are_reversible_with_exact_density_ratios(name, mutation):
     assert test.sum() > 0.9 * made.sum()
     # Differences across the facets of the tessellated sphere miss the kink in a few percent of the moves.
     ratio = forward.ratio[test] / (area_y[test] / area_x[test])
-    assert np.median(np.abs(ratio - 1)) < 2e-3 and np.mean(np.abs(ratio - 1) < 0.02) > 0.95, np.percentile(ratio, [1, 50, 99])
+    assert np.median(np.abs(ratio - 1)) < 2e-3 and np.mean(np.abs(ratio - 1) < 0.02) > 0.95, \
+        np.percentile(ratio, [1, 50, 99])
 
 
 def test_multichain_perturbation_is_reversible():
