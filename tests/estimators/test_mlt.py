@@ -17,8 +17,11 @@ from scipy import stats
 import pathspace as ps
 from conftest import ROOT, scene_dict
 from pathspace.estimators.path_mutations import (Lengths, bidirectional, caustic, caustic_toward, fresh_paths, lens,
-                                                 lens_to, multichain, multichain_to)
-from pathspace.estimators.mlt import MLT
+                                                 lens_to, multichain, multichain_to, perturbable)
+from pathspace.estimators import mlt as mlt_module
+from pathspace.estimators.base import Counters
+from pathspace.estimators.metropolis import contribution_function
+from pathspace.estimators.mlt import MLT, Bootstrap, PathChains, choose, mutation_odds
 from pathspace.estimators.path_walks import unit
 from pathspace.estimators.paths import Space, evaluate
 from pathspace.vecmath import orthonormal_basis
@@ -325,6 +328,70 @@ def test_bidirectional_mutation_keeps_the_target_distribution(name):
     symmetric, _ = stationarity_chi2(name, lambda ratio, kx, ky: (ratio > 0).astype(float))
     length, _ = stationarity_chi2(name, lambda ratio, kx, ky: ratio * (ky + 1) / (kx + 1))
     assert min(symmetric, length) > 2 * critical, (symmetric, length, critical)
+
+
+def chain_step_chi2(batches: int = 4, pairs: int = 100_000) -> tuple[float, int]:
+    """How far one step of :class:`PathChains` -- every chain mutated once by the default mixture, each choosing
+    among the mutations that apply to its path, and accepted or not -- moves an importance sample of c(f) on the
+    specular box (paths of 1 .. 5 segments weighted by c(f(x)) / sum_j p_j(x); ``batches`` of ``pairs`` pairs of
+    walks).  g are the indicators of (path length, which perturbations apply): what the choice's odds depend on.
+    Returns the chi-square of the weighted mean changes and its rank (see :func:`stationarity_chi2`)."""
+    top, pixels = 5, 16 * 16
+    s = Space(scene("cornell-box-specular", (16, 16)))
+    contribution = contribution_function("luminance", s.mode)
+    rng = np.random.default_rng(4)
+
+    def indicators(paths, values):
+        bits = np.array([1, 2, 4]) @ perturbable(paths, values)
+        return np.eye(8 * top)[(paths.k - 1) * 8 + bits].T
+
+    changes, pair_of = [], []
+    for batch in range(batches):
+        fresh = fresh_paths(s, rng.integers(1, top + 1, pairs), top + 1, rng.random)
+        w = top * contribution(fresh.weights())
+        keep = np.flatnonzero(w > 0)
+        x, xv = fresh.paths.take(keep), fresh.values.take(keep)
+        start = Bootstrap(np.ones(1), np.zeros(1), x, xv, np.zeros(keep.size, np.int64))
+        chains = PathChains(s, MLT(max_depth=top, direct=0), contribution, start, np.ones(keep.size), pixels,
+                            rng.random)
+        before = indicators(chains.paths, chains.values)
+        chains.step_all(np.zeros((3, pixels)), Counters())
+        assert min(chains.proposed.values()) > 100        # every mutation was chosen
+        changes.append(w[keep] * (indicators(chains.paths, chains.values) - before))
+        pair_of.append(fresh.pair[keep] + batch * pairs)
+    return mean_change_chi2(np.concatenate(changes, axis=1), np.concatenate(pair_of), batches * pairs)
+
+
+def test_mutations_are_chosen_among_those_that_apply():
+    """A perturbation is only chosen for a path it can move, in proportion to the mixture's weights."""
+    s = Space(scene("cornell-box-specular", (16, 16)))
+    rng = np.random.default_rng(6)
+    fresh = fresh_paths(s, rng.integers(1, 6, 20000), 6, rng.random)
+    x, xv = fresh.paths, fresh.values
+    weights = MLT().weights
+    odds = mutation_odds(weights, x, xv)
+    usable = np.vstack([np.ones((1, x.count), bool), perturbable(x, xv)])
+    assert usable[1:].any(axis=1).all() and (~usable[1:]).any(axis=1).all()   # each perturbation applies, and not
+    np.testing.assert_allclose(odds, weights[:, None] * usable / (weights @ usable))
+    kind = choose(odds, rng.random(x.count))
+    assert usable[kind, np.arange(x.count)].all()
+    assert choose(np.array([[0.5], [0.5], [0.0]]), np.array([1.0 - 1e-17])) == 1   # rounding: never a 0 odd
+    for k in range(4):
+        chosen, expected = np.sum(kind == k), odds[k].sum()
+        assert abs(chosen - expected) < 5 * np.sqrt(expected), (k, chosen, expected)
+
+
+def test_state_dependent_choice_keeps_the_target_distribution(monkeypatch):
+    """Detailed balance of a whole chain step, in its integrated form, where the chance of each mutation depends
+    on the path: a bidirectional mutation that changes which perturbations apply must carry p_b(y) / p_b(x) in
+    its acceptance.  Without that factor the same test fails."""
+    chi2, rank = chain_step_chi2()
+    assert rank >= 12, rank
+    critical = stats.chi2.isf(ALPHA, rank)
+    assert chi2 < critical, (chi2, critical)
+    monkeypatch.setattr(mlt_module, "choice_ratio", lambda weights, odds_x, proposed: np.ones_like(odds_x))
+    wrong, wrong_rank = chain_step_chi2()
+    assert wrong > stats.chi2.isf(ALPHA, wrong_rank), (wrong, chi2, critical)
 
 
 def check_same_f(f: np.ndarray, expected: np.ndarray, rtol: float) -> None:

@@ -402,7 +402,9 @@ def chain_statistics(groups: Sequence[Splatting], per_class: np.ndarray, passes:
         proposed = {kind: sum(g.proposed[kind] for g in groups) for kind in groups[0].proposed}
         accepted = {kind: sum(g.accepted[kind] for g in groups) for kind in groups[0].accepted}
         longest = np.concatenate([g.longest_rejections for g in groups])
+        total = sum(proposed.values())
         found.update(acceptance={k: accepted[k] / proposed[k] if proposed[k] else None for k in proposed},
+                     proposal_share={k: proposed[k] / total if total else 0.0 for k in proposed},
                      longest_rejection_run=int(longest.max()),
                      longest_rejection_run_median=float(np.median(longest)))
     return found

@@ -3,14 +3,24 @@
 A chain's state is a path x_0 .. x_k itself (:mod:`pathspace.estimators.paths`),
 and the chains sample paths in proportion to c(f(x)) (c: luminance Y by
 default) by a mixture of Veach's mutations
-(:mod:`pathspace.estimators.path_mutations`), chosen per step with
-probabilities ``bidirectional`` : ``lens`` : ``caustic`` : ``multichain``; each accepts with
-a = min(1, c(f(y)) T(y -> x) / (c(f(x)) T(x -> y))), the transition
-densities computed exactly.  Bidirectional mutations make the chains
-ergodic; the perturbations explore near a path (the lens perturbation
-moves what the camera sees, the caustic perturbation moves where light
-through specular chains lands, the multi-chain perturbation moves caustics
-seen through specular chains).
+(:mod:`pathspace.estimators.path_mutations`).  Bidirectional mutations make
+the chains ergodic; the perturbations explore near a path (the lens
+perturbation moves what the camera sees, the caustic perturbation moves
+where light through specular chains lands, the multi-chain perturbation
+moves caustics seen through specular chains).
+
+Each step chooses, per chain, among the mutations that can move its path x:
+the bidirectional mutation always, a perturbation only where x has the
+vertices it moves.  The probabilities p_m(x) are the weights
+``bidirectional`` : ``lens`` : ``caustic`` : ``multichain`` of those mutations,
+normalised, so no step is spent proposing a perturbation that cannot apply.
+A proposal y is accepted with a = min(1, c(f(y)) T(y -> x) / (c(f(x)) T(x -> y)))
+(Veach 1997, eq. 11.3), the transition densities computed exactly and
+including the choice: T(x -> y) = p_m(x) T_m(x -> y) (Metropolis-Hastings
+with a state-dependent mixture, Hastings 1970).  A perturbation keeps the
+length and the specular vertices of a path, and with them the mutations
+that apply, so p_m(y) = p_m(x) cancels; a bidirectional mutation can change
+them, and its ratio carries p_b(y) / p_b(x).
 
 As Veach recommends (sec. 11.5), short paths -- emitters seen directly and
 direct lighting, and by default everything up to ``direct`` = 4 segments,
@@ -58,7 +68,7 @@ from .paths import Paths, PathValues, Space
 from .primary import Uniforms
 from .workers import in_rounds, split
 
-__all__ = ["MLT", "PathChains"]
+__all__ = ["MLT", "PathChains", "choice_ratio", "choose", "mutation_odds"]
 
 MUTATIONS = ("bidirectional", "lens", "caustic", "multichain")
 LENS_RADIUS = 0.1        # r1 of the lens perturbation, pixels; r2 is LENS_FRACTION of the larger film side
@@ -96,7 +106,7 @@ class PathChains(Splatting):
                  uniforms) -> None:
         super().__init__(scale, pixels, 3, MUTATIONS)
         self.space, self.lengths, self.contribution, self.uniforms = space, estimator.lengths, contribution, uniforms
-        self.cdf = np.cumsum(estimator.weights)
+        self.weights = estimator.weights
         self.paths, self.values = start.paths, start.values
         self.f = contribution(self.values.f)
         self.current = Proposal(np.arange(self.paths.count), self.values.pixel, self.values.f)
@@ -116,7 +126,8 @@ class PathChains(Splatting):
         """One mutation of every chain, splatting into ``image`` (3, pixels)."""
         n = self.paths.count
         u = self.uniforms(2 * n).reshape(2, n)
-        kind = np.minimum(np.searchsorted(self.cdf, u[0], side="right"), len(MUTATIONS) - 1)
+        odds = mutation_odds(self.weights, self.paths, self.values)
+        kind = choose(odds, u[0])
         f_new, accept_p = np.zeros(n), np.zeros(n)
         value, pixel = np.zeros((3, n)), np.zeros(n, np.int64)
         proposals = {}
@@ -125,6 +136,8 @@ class PathChains(Splatting):
             # Slots the paths and their proposals can use (a bidirectional mutation adds at most ADD_SPREAD).
             slots = min(self.paths.slots, int(self.paths.k[lanes].max()) + 1 + ADD_SPREAD)
             proposed = self._mutate(int(code), self.paths.take(lanes, slots), self.values.take(lanes, slots))
+            if code == 0:
+                proposed.ratio = proposed.ratio * choice_ratio(self.weights, odds[0].take(lanes), proposed)
             c = self.contribution(proposed.values.f)
             finite = np.isfinite(proposed.values.f).all(axis=0) & np.isfinite(c)
             counters.nonfinite_contributions += int(finite.size - np.count_nonzero(finite))
@@ -145,6 +158,27 @@ class PathChains(Splatting):
                 self.values.assign(lanes.take(taken), proposed.values.take(taken))
         self.f = np.where(accept, f_new, self.f)
         self.current = Proposal(np.arange(n), self.values.pixel, self.values.f)
+
+
+def mutation_odds(weights: np.ndarray, x: Paths, xv: PathValues) -> np.ndarray:
+    """(mutations, n): the probability p_m(x) of each mutation (:data:`MUTATIONS` order) at each of paths ``x``:
+    ``weights`` of the mutations that can move the path (the bidirectional one always, each perturbation where
+    :func:`~pathspace.estimators.path_mutations.perturbable`), normalised per path."""
+    odds = weights[:, None] * np.vstack([np.ones((1, x.count), bool), mutations.perturbable(x, xv)])
+    return odds / odds.sum(axis=0)
+
+
+def choose(odds: np.ndarray, u: np.ndarray) -> np.ndarray:
+    """The mutation (row of ``odds``, (mutations, n)) each uniform ``u`` (n,) picks; never one of probability 0."""
+    below = (np.cumsum(odds, axis=0) <= u).sum(axis=0)
+    last = odds.shape[0] - 1 - np.argmax(odds[::-1] > 0, axis=0)   # the last possible one, should rounding pass it
+    return np.minimum(below, last)
+
+
+def choice_ratio(weights: np.ndarray, odds_x: np.ndarray, proposed: Proposed) -> np.ndarray:
+    """p_b(y) / p_b(x) of bidirectional mutations x -> y: the reverse move is chosen at y with y's odds
+    (``odds_x``: p_b(x))."""
+    return mutation_odds(weights, proposed.paths, proposed.values)[0] / odds_x
 
 
 def _mutation_weight(value, name):

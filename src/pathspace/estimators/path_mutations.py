@@ -63,7 +63,7 @@ from .primary import SmallStep
 from .visibility import segment_blocked
 
 __all__ = ["ADD_SPREAD", "Lengths", "Proposed", "split_densities", "bidirectional", "lens", "lens_to", "caustic",
-           "caustic_toward", "multichain", "multichain_to", "fresh_paths", "FreshPaths"]
+           "caustic_toward", "multichain", "multichain_to", "perturbable", "fresh_paths", "FreshPaths"]
 
 ADD_SPREAD = 2   # k_a differs from k_d by at most this
 WAVELENGTH_STEP = SmallStep("exponential", 1.0 / 64.0)   # how bidirectional mutations move the wavelengths
@@ -382,13 +382,26 @@ def lens_to(space: Space, x: Paths, xv: PathValues, raster: np.ndarray, uniforms
     """The lens perturbation of paths ``x`` that moves their film positions to ``raster`` (2, n)."""
     k = x.k
     lanes = np.arange(x.count)
-    j = _specular_run(xv, k, k)
-    usable = (k >= 1) & ((j == 0) | ~xv.delta[lanes, np.maximum(j - 1, 0)])
+    j, usable = _lens_source(x, xv)
     y, ok = _camera_chain(space, x, j, usable, raster, uniforms)
     yv = evaluate(space, y)
     ok &= _same_specular_chain(x, y, lanes, j + 1, k, yv.delta) & ~yv.delta[lanes, j]
     ok &= _joined(space, x, y, ok, j)
     return _perturbed(y, yv, ok, _jacobian(xv, k, j, k, "rev"), _jacobian(yv, k, j, k, "rev"))
+
+
+def _lens_source(x: Paths, xv: PathValues) -> tuple[np.ndarray, np.ndarray]:
+    """(j, usable): paths ... x_j S* E with x_j not specular and x_{j-1} not specular (or x_j the light), for the
+    lens perturbation."""
+    j = _specular_run(xv, x.k, x.k)
+    return j, (x.k >= 1) & ((j == 0) | ~xv.delta[np.arange(x.count), np.maximum(j - 1, 0)])
+
+
+def perturbable(x: Paths, xv: PathValues) -> np.ndarray:
+    """(3, n) bool: whether the lens, caustic and multi-chain perturbations can move each of paths ``x`` (whether
+    the path has the vertices each one moves).  This depends only on the path's length and which of its vertices
+    are specular, which the perturbations keep; a bidirectional mutation can change it."""
+    return np.stack([_lens_source(x, xv)[1], _caustic_source(x, xv)[1], _multichain_source(x, xv)[2]])
 
 
 def _camera_chain(space: Space, x: Paths, j: np.ndarray, usable: np.ndarray, raster: np.ndarray,
