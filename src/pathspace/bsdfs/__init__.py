@@ -100,17 +100,28 @@ class MaterialLanes:
     def __init__(self, table: MaterialTable, material_ids: np.ndarray, colours, options: dict) -> None:
         self.count = int(material_ids.size)
         self.channels = colours.channels
-        if len(table.kinds) == 1:
-            self.groups = [(table.kinds[0], None, table.gather(0, material_ids, colours, options))]
+        kind = table.kind_of.take(material_ids) if len(table.kinds) > 1 else None
+        present = [0] if kind is None else np.flatnonzero(np.bincount(kind, minlength=len(table.kinds))).tolist()
+        if len(present) == 1:      # one kind among these lanes: no lanes are moved
+            self.groups = [(table.kinds[present[0]], None, table.gather(present[0], material_ids, colours, options))]
         else:
-            kind = table.kind_of.take(material_ids)
             self.groups = []
-            for k in range(len(table.kinds)):
+            for k in present:
                 idx = np.flatnonzero(kind == k)
-                if idx.size:
-                    self.groups.append((table.kinds[k], idx, table.gather(k, material_ids.take(idx), colours.take(idx),
-                                                                          options)))
+                self.groups.append((table.kinds[k], idx, table.gather(k, material_ids.take(idx), colours.take(idx),
+                                                                      options)))
         self.delta = table.delta.take(material_ids) if table.delta.any() else None
+
+    def without_delta(self) -> tuple[np.ndarray, "MaterialLanes"]:
+        """(lanes, their materials): the lanes whose material is not specular, and a :class:`MaterialLanes` of
+        those lanes alone that reuses the parameters already gathered for them."""
+        kept = [(model, idx) for model, idx, _ in self.groups if not model.delta]
+        lanes = np.flatnonzero(~self.delta) if self.delta is not None else np.arange(self.count)
+        part = MaterialLanes.__new__(MaterialLanes)
+        part.count, part.channels, part.delta = int(lanes.size), self.channels, None
+        part.groups = [(model, None if len(kept) == 1 else np.searchsorted(lanes, idx), params)
+                       for model, idx, params in self.groups if not model.delta]
+        return lanes, part
 
     def eval(self, surface: Surface, wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """f |cos| (C, N) and pdf (N,) of every lane's material (zero for delta materials)."""

@@ -364,10 +364,8 @@ class PathTracer(Estimator):
             lanes.radiance += self._next_event(scene, materials, arrival, lanes.beta, u, colours)
             walk.rays += lanes.size
             return
-        todo = np.flatnonzero(~materials.delta)
+        todo, subset = materials.without_delta()
         if todo.size:
-            subset = MaterialLanes(scene.materials, arrival.material.take(todo), colours.take(todo),
-                                   {"diffuse_sampling": self.diffuse_sampling})
             lanes.radiance[:, todo] += self._next_event(scene, subset, arrival.keep(todo),
                                                         np.take(lanes.beta, todo, axis=1), np.take(u, todo, axis=1),
                                                         colours.take(todo))

@@ -57,6 +57,7 @@ SURFACE, CAMERA, LIGHT = 0, 1, 2
 SAFETY_VERTICES = 10_000
 FIELDS = ("lane", "index", "p", "n", "eps", "wo", "beta", "fwd", "rev", "g_prev", "delta", "kind", "material",
           "entity", "q", "q_rev", "infinite", "u")
+DENSITY_FIELDS = ("fwd", "rev", "g_prev", "q", "q_rev")   # read by MIS weights only: light tracing leaves them out
 # The numbers drawn: at the lens (film position, lens point), at the light (light choice, point and
 # direction; the lens sample that joins vertex 0 to the camera), and per vertex (the BSDF sample, the
 # roulette, and what this vertex's connections use: a light sample, or a lens sample).
@@ -104,7 +105,8 @@ class Subpaths:
     leaving the vertex toward its predecessor into an area density there:
     |cos| / d^2 at the predecessor, |cos| alone from a vertex at infinity, 1
     toward one).  ``terminated`` (lanes,): a dispersive interface kept only
-    the hero wavelength somewhere on the lane's subpath.
+    the hero wavelength somewhere on the lane's subpath.  The fields of
+    :data:`DENSITY_FIELDS` are None where the walks' settings skip densities.
     """
 
     offset: np.ndarray
@@ -235,18 +237,19 @@ class _Recorder:
         self.records.append(record)
         return record
 
-    def flatten(self, lanes: int, terminated: np.ndarray) -> Subpaths:
+    def flatten(self, lanes: int, terminated: np.ndarray, densities: bool = True) -> Subpaths:
         # Records hold vertices depth by depth, and a lane has one vertex of every index below its length:
         # vertex i of lane l goes to offset[l] + i.  Each field is concatenated over the records and gathered
-        # into that order in one take (2-3x faster than writing record by record).
+        # into that order in one take (2-3x faster than writing record by record); without ``densities``,
+        # DENSITY_FIELDS are left out (None).
         lane = np.concatenate([record["lane"] for record in self.records])
         index = np.concatenate([record["index"] for record in self.records])
         offset = np.concatenate([[0], np.cumsum(np.bincount(lane, minlength=lanes))]).astype(np.int64)
         order = np.empty(lane.size, np.int64)
         order[offset.take(lane) + index] = np.arange(lane.size)
         fields = {name: np.take(np.concatenate([record[name] for record in self.records], axis=-1), order, axis=-1)
-                  for name in FIELDS}
-        return Subpaths(offset=offset, terminated=terminated, **fields)
+                  for name in FIELDS if densities or name not in DENSITY_FIELDS}
+        return Subpaths(offset=offset, terminated=terminated, **{**dict.fromkeys(FIELDS), **fields})
 
 
 class _Growth:
@@ -385,7 +388,7 @@ def camera_subpaths(settings: SubpathSettings, pixels: np.ndarray, sampler, limi
     growth.limit = limit
     growth.run()
     settings.counters.rays += growth.walk.rays
-    return recorder.flatten(count, growth.terminated)
+    return recorder.flatten(count, growth.terminated, settings.densities)
 
 
 def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool,
@@ -428,4 +431,4 @@ def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool,
     growth.limit = limit
     growth.run()
     settings.counters.rays += growth.walk.rays
-    return recorder.flatten(count, growth.terminated), LensHits.concatenate(growth.lens_hits or [], colours.channels)
+    return recorder.flatten(count, growth.terminated, settings.densities), LensHits.concatenate(growth.lens_hits or [], colours.channels)
