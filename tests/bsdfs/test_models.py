@@ -8,7 +8,9 @@ import zlib
 import numpy as np
 import pytest
 
-from pathspace.bsdfs import Conductor, Dielectric, Diffuse, Mirror, Phong
+from pathspace.bsdfs import Conductor, Dielectric, Diffuse, MaterialLanes, MaterialTable, Mirror, Phong
+from pathspace.bsdfs.base import Surface
+from pathspace.spectra import RGBColours
 from pathspace.validate.bsdf import BSDFCheck, bsdf_albedo, bsdf_chi2, bsdf_consistency
 
 GOLD = dict(eta=(0.143, 0.374, 1.442), k=(3.983, 2.385, 1.603))
@@ -113,3 +115,46 @@ def test_material_validation():
     with pytest.raises(ValueError, match="ior"):
         Dielectric(-1.0)
 
+
+
+def test_material_lanes_of_several_kinds_and_their_non_specular_part():
+    """A wavefront of mixed materials evaluates each lane with its own model, one of a single kind (among
+    several in the scene) takes the one-kind path, and ``without_delta`` gives the non-specular lanes with the
+    same values as the whole wavefront, through the parameters already gathered."""
+    table = MaterialTable(["white", "glossy", "gold", "mirror", "glass"],
+                          [Diffuse((0.2, 0.8, 0.4)), Phong((0.3, 0.3, 0.3), (0.5, 0.6, 0.2), 10.0),
+                           Conductor(alpha=0.3, **GOLD), Mirror((1.0, 1.0, 1.0)), Dielectric(1.5)])
+    rng = np.random.default_rng(8)
+    count = 4000
+    ids = rng.integers(0, 5, count)
+    normal = np.tile(np.array([[0.0], [0.0], [1.0]], np.float32), count)
+    direction = -rng.normal(size=(3, count)).astype(np.float32)
+    direction[2] = -np.abs(direction[2])
+    direction /= np.linalg.norm(direction, axis=0)
+    surface = Surface.facing(normal, direction)
+    wi = rng.normal(size=(3, count)).astype(np.float32)
+    wi[2] = np.abs(wi[2])
+    wi /= np.linalg.norm(wi, axis=0)
+    options = {"diffuse_sampling": "cosine"}
+    lanes = MaterialLanes(table, ids, RGBColours, options)
+    f_cos, pdf = lanes.eval(surface, wi)
+    for k in range(5):                 # each lane as if its material were alone
+        one = np.flatnonzero(ids == k)
+        alone = MaterialLanes(MaterialTable(["m"], [table.materials[k]]), np.zeros(one.size, np.int64), RGBColours,
+                              options).eval(surface.take(one), wi[:, one])
+        np.testing.assert_allclose(f_cos[:, one], alone[0], rtol=1e-12)
+        np.testing.assert_allclose(pdf[one], alone[1], rtol=1e-12)
+    assert (f_cos[:, ids >= 3] == 0).all()                              # delta materials: nothing off their lobes
+    glossy = np.flatnonzero(ids == 1)
+    single = MaterialLanes(table, ids.take(glossy), RGBColours, options)
+    assert len(single.groups) == 1 and single.groups[0][1] is None
+    np.testing.assert_allclose(single.eval(surface.take(glossy), wi[:, glossy])[0], f_cos[:, glossy], rtol=1e-12)
+    todo, part = lanes.without_delta()
+    np.testing.assert_array_equal(todo, np.flatnonzero(ids < 3))
+    assert len(part.groups) == 3 and part.count == todo.size
+    part_f, part_pdf = part.eval(surface.take(todo), wi[:, todo])
+    np.testing.assert_allclose(part_f, f_cos[:, todo], rtol=1e-12)
+    np.testing.assert_allclose(part_pdf, pdf[todo], rtol=1e-12)
+    todo, part = single.without_delta()
+    np.testing.assert_array_equal(todo, np.arange(glossy.size))
+    assert part.groups[0][1] is None
