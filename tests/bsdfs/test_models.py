@@ -116,7 +116,6 @@ def test_material_validation():
         Dielectric(-1.0)
 
 
-
 def test_material_lanes_of_several_kinds_and_their_non_specular_part():
     """A wavefront of mixed materials evaluates each lane with its own model, one of a single kind (among
     several in the scene) takes the one-kind path, and ``without_delta`` gives the non-specular lanes with the
@@ -158,3 +157,11 @@ def test_material_lanes_of_several_kinds_and_their_non_specular_part():
     todo, part = single.without_delta()
     np.testing.assert_array_equal(todo, np.arange(glossy.size))
     assert part.groups[0][1] is None
+    specular = MaterialLanes(table, np.array([3, 4, 4, 3]), RGBColours, options)
+    todo, part = specular.without_delta()
+    assert todo.size == 0 and part.groups == [] and part.count == 0
+    no_delta = MaterialTable(["white", "glossy"], table.materials[:2])
+    both = MaterialLanes(no_delta, ids % 2, RGBColours, options)
+    todo, part = both.without_delta()
+    np.testing.assert_array_equal(todo, np.arange(count))
+    np.testing.assert_allclose(part.eval(surface, wi)[0], both.eval(surface, wi)[0], rtol=0)

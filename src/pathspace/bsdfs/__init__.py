@@ -93,8 +93,8 @@ class MaterialLanes:
     """The materials of a wavefront's lanes, grouped by kind, parameters gathered once.
 
     ``eval`` and ``sample`` run each kind's functions on its lanes and
-    assemble full-width results; with a single kind in the scene no lanes
-    are moved at all.
+    assemble full-width results; with a single kind among the lanes no
+    lanes are moved at all.
     """
 
     def __init__(self, table: MaterialTable, material_ids: np.ndarray, colours, options: dict) -> None:

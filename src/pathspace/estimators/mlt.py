@@ -163,7 +163,8 @@ class PathChains(Splatting):
 def mutation_odds(weights: np.ndarray, x: Paths, xv: PathValues) -> np.ndarray:
     """(mutations, n): the probability p_m(x) of each mutation (:data:`MUTATIONS` order) at each of paths ``x``:
     ``weights`` of the mutations that can move the path (the bidirectional one always, each perturbation where
-    :func:`~pathspace.estimators.path_mutations.perturbable`), normalised per path."""
+    :func:`~pathspace.estimators.path_mutations.perturbable`), normalised per path.  The bidirectional weight
+    must be > 0 (as :class:`MLT` requires), so that every path has a mutation."""
     odds = weights[:, None] * np.vstack([np.ones((1, x.count), bool), mutations.perturbable(x, xv)])
     return odds / odds.sum(axis=0)
 
@@ -237,9 +238,9 @@ class MLT(Estimator):
         w = self.weights
         lines = [f"path-space MLT (Veach & Guibas 1997): {self.chains} chains over paths of {self.direct + 1} .. "
                  f"{self.max_depth} segments, started from {self.bootstrap} bootstrap samples (pairs of walks) per "
-                 f"length in proportion to the {self.contribution}; mutations: bidirectional {w[0]:.2f}, lens perturbation "
-                 f"{w[1]:.2f}, caustic perturbation {w[2]:.2f}, multi-chain perturbation {w[3]:.2f}; expected-value "
-                 "splatting"]
+                 f"length in proportion to the {self.contribution}; mutation weights (each chain chooses among "
+                 f"those that can move its path): bidirectional {w[0]:.2f}, lens perturbation {w[1]:.2f}, caustic "
+                 f"perturbation {w[2]:.2f}, multi-chain perturbation {w[3]:.2f}; expected-value splatting"]
         if self.direct:
             lines.append(f"paths of at most {self.direct} segments by BDPT, one sample per pixel per pass")
         return lines

@@ -214,7 +214,7 @@ class SubpathSettings:
     max_vertices: int
     counters: Counters
     control: RenderControl
-    densities: bool = True  # whether to record the reverse densities (``rev``) that MIS weights read
+    densities: bool = True  # whether to keep the densities MIS weights read (``rev``, and DENSITY_FIELDS)
 
 
 class _Recorder:
@@ -431,4 +431,5 @@ def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool,
     growth.limit = limit
     growth.run()
     settings.counters.rays += growth.walk.rays
-    return recorder.flatten(count, growth.terminated, settings.densities), LensHits.concatenate(growth.lens_hits or [], colours.channels)
+    subpaths = recorder.flatten(count, growth.terminated, settings.densities)
+    return subpaths, LensHits.concatenate(growth.lens_hits or [], colours.channels)
