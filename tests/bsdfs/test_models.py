@@ -118,7 +118,7 @@ def test_material_validation():
 
 def test_material_lanes_of_several_kinds_and_their_non_specular_part():
     """A wavefront of mixed materials evaluates each lane with its own model, one of a single kind (among
-    several in the scene) takes the one-kind path, and ``without_delta`` gives the non-specular lanes with the
+    several in the scene) takes the one-kind path, and ``part`` gives the specular or non-specular lanes with the
     same values as the whole wavefront, through the parameters already gathered."""
     table = MaterialTable(["white", "glossy", "gold", "mirror", "glass"],
                           [Diffuse((0.2, 0.8, 0.4)), Phong((0.3, 0.3, 0.3), (0.5, 0.6, 0.2), 10.0),
@@ -148,20 +148,28 @@ def test_material_lanes_of_several_kinds_and_their_non_specular_part():
     single = MaterialLanes(table, ids.take(glossy), RGBColours, options)
     assert len(single.groups) == 1 and single.groups[0][1] is None
     np.testing.assert_allclose(single.eval(surface.take(glossy), wi[:, glossy])[0], f_cos[:, glossy], rtol=1e-12)
-    todo, part = lanes.without_delta()
+    todo, part = lanes.part(specular=False)
     np.testing.assert_array_equal(todo, np.flatnonzero(ids < 3))
     assert len(part.groups) == 3 and part.count == todo.size
     part_f, part_pdf = part.eval(surface.take(todo), wi[:, todo])
     np.testing.assert_allclose(part_f, f_cos[:, todo], rtol=1e-12)
     np.testing.assert_allclose(part_pdf, pdf[todo], rtol=1e-12)
-    todo, part = single.without_delta()
+    todo, part = single.part(specular=False)
     np.testing.assert_array_equal(todo, np.arange(glossy.size))
     assert part.groups[0][1] is None
     specular = MaterialLanes(table, np.array([3, 4, 4, 3]), RGBColours, options)
-    todo, part = specular.without_delta()
+    todo, part = specular.part(specular=False)
     assert todo.size == 0 and part.groups == [] and part.count == 0
     no_delta = MaterialTable(["white", "glossy"], table.materials[:2])
     both = MaterialLanes(no_delta, ids % 2, RGBColours, options)
-    todo, part = both.without_delta()
+    todo, part = both.part(specular=False)
     np.testing.assert_array_equal(todo, np.arange(count))
     np.testing.assert_allclose(part.eval(surface, wi)[0], both.eval(surface, wi)[0], rtol=0)
+    todo, part = lanes.part(specular=True)                              # the mirror and glass lanes
+    np.testing.assert_array_equal(todo, np.flatnonzero(ids >= 3))
+    assert len(part.groups) == 2 and part.delta.all()
+    u = rng.random((3, count))
+    whole, alone = lanes.sample(surface, u), part.sample(surface.take(todo), u[:, todo])
+    np.testing.assert_array_equal(alone.wi, whole.wi[:, todo])
+    np.testing.assert_array_equal(alone.weight, whole.weight[:, todo])
+    np.testing.assert_array_equal(alone.pdf, whole.pdf[todo])

@@ -112,15 +112,19 @@ class MaterialLanes:
                                                                       options)))
         self.delta = table.delta.take(material_ids) if table.delta.any() else None
 
-    def without_delta(self) -> tuple[np.ndarray, "MaterialLanes"]:
-        """(lanes, their materials): the lanes whose material is not specular, and a :class:`MaterialLanes` of
-        those lanes alone that reuses the parameters already gathered for them."""
-        kept = [(model, idx) for model, idx, _ in self.groups if not model.delta]
-        lanes = np.flatnonzero(~self.delta) if self.delta is not None else np.arange(self.count)
+    def part(self, specular: bool) -> tuple[np.ndarray, "MaterialLanes"]:
+        """(lanes, their materials): the lanes whose material is specular (delta), or is not, and a
+        :class:`MaterialLanes` of those lanes alone that reuses the parameters already gathered for them."""
+        if self.delta is None:
+            lanes = np.arange(self.count) if not specular else np.zeros(0, np.int64)
+        else:
+            lanes = np.flatnonzero(self.delta if specular else ~self.delta)
+        kept = [group for group in self.groups if group[0].delta == specular]
         part = MaterialLanes.__new__(MaterialLanes)
-        part.count, part.channels, part.delta = int(lanes.size), self.channels, None
+        part.count, part.channels = int(lanes.size), self.channels
+        part.delta = np.full(lanes.size, True) if specular else None
         part.groups = [(model, None if len(kept) == 1 else np.searchsorted(lanes, idx), params)
-                       for model, idx, params in self.groups if not model.delta]
+                       for model, idx, params in kept]
         return lanes, part
 
     def eval(self, surface: Surface, wi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

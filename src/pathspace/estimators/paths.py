@@ -213,9 +213,8 @@ def _scattering(scene, colours, material: np.ndarray, n: np.ndarray, to_prev: np
     from_light = Surface.facing(n, -to_prev)    # a walk from the light arrives from the previous one
     f_cos, pdf_prev = materials.eval(from_camera, to_prev.astype(np.float32))
     _, pdf_next = materials.eval(from_light, to_next.astype(np.float32))
-    if delta.any():
-        d = np.flatnonzero(delta)
-        specular = MaterialLanes(table, material.take(d), colours.take(d), OPTIONS)
+    d, specular = materials.part(specular=True)
+    if d.size:
         prev, following = np.take(to_prev, d, axis=1), np.take(to_next, d, axis=1)
         lobe_f, lobe_prev, eta, terminated[d] = delta_lobe(specular, from_camera.take(d), prev, "radiance")
         _, lobe_next, _, _ = delta_lobe(specular, from_light.take(d), following, "importance")

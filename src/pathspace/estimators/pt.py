@@ -364,7 +364,7 @@ class PathTracer(Estimator):
             lanes.radiance += self._next_event(scene, materials, arrival, lanes.beta, u, colours)
             walk.rays += lanes.size
             return
-        todo, subset = materials.without_delta()
+        todo, subset = materials.part(specular=False)
         if todo.size:
             lanes.radiance[:, todo] += self._next_event(scene, subset, arrival.keep(todo),
                                                         np.take(lanes.beta, todo, axis=1), np.take(u, todo, axis=1),
