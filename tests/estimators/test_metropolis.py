@@ -184,7 +184,8 @@ def test_same_seed_same_image_and_stats_are_reported():
 @pytest.mark.parametrize("estimator", ["pssmlt", "mmlt", "mlt"])
 def test_images_do_not_depend_on_threads(estimator):
     """More chains than one group (workers.PIECE): groups, bootstrap batches and (with more pixels than a piece)
-    mlt's pixel ranges of direct paths run on several threads, and the image is bit for bit that of one thread."""
+    mlt's pixel ranges of direct paths, alongside its chains, run on several threads, and the image is bit for bit
+    that of one thread."""
     params = dict(spp=2, seed=7, max_depth=MAX_DEPTH, chains=PIECE + 1000, bootstrap=3 * (1 << 14) // 2)
     resolution = (136, 128) if estimator == "mlt" else (64, 72)
     one = ps.render(scene("cornell-box", resolution), estimator, threads=1, **params)

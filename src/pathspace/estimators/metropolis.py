@@ -63,10 +63,10 @@ from .base import Budget, Checkpoint, Counters, Estimator, RenderJob, counted, p
 from .bootstrap import bootstrap
 from .control import Interrupted
 from .primary import KERNELS, ChainStates, SmallStep, advance, new_counters
-from .workers import in_parallel, in_rounds, split
+from .workers import in_order, in_parallel, split
 
 __all__ = ["CHAINS", "CONTRIBUTIONS", "Metropolis", "Proposal", "Target", "Chains", "Splatting", "chain_statistics",
-           "contribution_function", "evaluate_target", "run_passes", "step_groups", "summed_images", "uniform_stream"]
+           "contribution_function", "evaluate_target", "run_passes", "step_groups", "uniform_stream"]
 
 CONTRIBUTIONS = ("luminance", "xyz", "max")
 # Default number of chains (PSSMLT, MMLT and path-space MLT).  Fewer, longer chains keep less of the error of
@@ -364,21 +364,15 @@ def run_passes(job: RenderJob, budget: Budget, on_checkpoint: Callable[[Checkpoi
     return passes
 
 
-def summed_images(job: RenderJob, pieces: int, render: Callable[[int, Counters], np.ndarray]) -> np.ndarray:
-    """The sum, in piece order, of the images (C, pixels) ``render(k, counters)`` of pieces k = 0 .. ``pieces`` - 1,
-    made on the render's threads a round of ``threads`` pieces at a time (so that at most that many images are
-    held); what the pieces count joins ``job.counters``, also when the render is interrupted."""
-    image = np.zeros((job.film.channels, job.film.pixel_count))
-    with counted(job.counters, pieces) as counters:
-        for _, part in in_rounds(job.threads, lambda k: render(k, counters[k]), range(pieces), job.control):
-            image += part
-    return image
-
-
-def step_groups(job: RenderJob, groups: Sequence[Splatting], steps: int) -> np.ndarray:
-    """One pass of independent groups of chains (each with a ``step_all``) on the render's threads: ``steps``
-    steps of every chain, then the splats still pending; the pass's image (C, pixels), summed over the groups in
-    their order."""
+def step_groups(job: RenderJob, groups: Sequence[Splatting], steps: int,
+                others: Sequence[Callable[[Counters], np.ndarray]] = ()) -> np.ndarray:
+    """One pass of independent groups of chains (each with a ``step_all``): ``steps`` steps of every chain, then
+    the splats still pending; the pass's image (C, pixels), summed over the groups in their order and divided by
+    ``steps``.  ``others``: more pieces of the pass (images made with the given counters, e.g. path-space MLT's
+    BDPT pass of the direct paths), added in their order.  All pieces, groups first, run on the render's threads
+    as the threads come free (:func:`~pathspace.estimators.workers.in_order`): a pass of one group of chains and
+    one range of direct pixels keeps two threads busy.  What the pieces count joins ``job.counters``, also when the
+    render is interrupted."""
     def walk(g: int, counters: Counters) -> np.ndarray:
         image = np.zeros((job.film.channels, job.film.pixel_count))
         for _ in range(steps):
@@ -387,7 +381,16 @@ def step_groups(job: RenderJob, groups: Sequence[Splatting], steps: int) -> np.n
         groups[g].flush(image)
         return image
 
-    return summed_images(job, len(groups), walk) / steps
+    pieces = [partial(walk, g) for g in range(len(groups))] + list(others)
+    chained = np.zeros((job.film.channels, job.film.pixel_count))
+    other = np.zeros_like(chained)
+    with counted(job.counters, len(pieces)) as counters:
+        for k, part in in_order(job.threads, lambda k: pieces[k](counters[k]), range(len(pieces)), job.control):
+            if k < len(groups):
+                chained += part
+            else:
+                other += part
+    return chained / steps + other if groups else other
 
 
 def chain_statistics(groups: Sequence[Splatting], per_class: np.ndarray, passes: int, steps: int,

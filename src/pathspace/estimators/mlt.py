@@ -49,6 +49,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from functools import partial
+from typing import Callable
 
 import numpy as np
 
@@ -60,7 +61,7 @@ from .bidirectional import STREAMS
 from .bootstrap import BATCH, GROUPS, allocate, reservoir_draw
 from .control import Interrupted, RenderControl
 from .metropolis import (CHAINS, CONTRIBUTIONS, Proposal, Splatting, chain_statistics, contribution_function,
-                         run_passes, step_groups, summed_images, uniform_stream)
+                         run_passes, step_groups, uniform_stream)
 from .parameters import or_none
 from . import path_mutations as mutations
 from .path_mutations import ADD_SPREAD, FreshPaths, Lengths, Proposed, fresh_paths
@@ -293,31 +294,27 @@ class MLT(Estimator):
         steps = -(-pixels // boot.label.size) if groups else 0
 
         def one_pass(index: int) -> np.ndarray:
-            image = step_groups(job, groups, steps) if groups else np.zeros((film.channels, pixels))
-            if direct is not None:
-                image += self._direct(job, index)
-            return image
+            return step_groups(job, groups, steps, self._direct(job, index) if direct is not None else ())
 
         started = control.elapsed()
         passes = run_passes(job, budget, on_checkpoint, one_pass)
         stats.update(chain_statistics(groups, per_class, passes, steps, control.elapsed() - started))
 
-    def _direct(self, job: RenderJob, pass_index: int) -> np.ndarray:
-        """One BDPT sample per pixel of the paths of at most ``direct`` segments (3, pixels), in ranges of pixels
-        (each with its own random streams) on the render's threads."""
+    def _direct(self, job: RenderJob, pass_index: int) -> list[Callable[[Counters], np.ndarray]]:
+        """One BDPT sample per pixel of the paths of at most ``direct`` segments, as pieces of the pass: one per
+        range of pixels (each with its own random streams), each making an image (3, pixels) with given counters."""
         pixels = job.film.pixel_count
-        ranges = [(part, {name: job.samplers.open([(_DIRECT, pass_index, code, part.start)], [part.stop - part.start])
-                          for name, code in STREAMS.items()}) for part in split(pixels)]
 
-        def render_range(k: int, counters: Counters) -> np.ndarray:
-            part, samplers = ranges[k]
+        def render_range(part: slice, counters: Counters) -> np.ndarray:
+            samplers = {name: job.samplers.open([(_DIRECT, pass_index, code, part.start)], [part.stop - part.start])
+                        for name, code in STREAMS.items()}
             job.control.check()
             found = self.direct_estimator.evaluate(job.scene, np.arange(part.start, part.stop), samplers, job.mode,
                                                    counters)
             return np.stack([np.bincount(found.pixel, weights=found.weighted[c], minlength=pixels)
                              for c in range(job.film.channels)])
 
-        return summed_images(job, len(ranges), render_range)
+        return [partial(render_range, part) for part in split(pixels)]
 
     def _bootstrap(self, space: Space, contribution, streams, counters: Counters, control: RenderControl,
                    threads: int) -> Bootstrap:

@@ -11,12 +11,13 @@ their inner loops, so the pieces run in parallel.
 """
 from __future__ import annotations
 
-from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
+from collections import deque
+from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from typing import Callable, Iterable, Iterator, Sequence, TypeVar
 
 from .control import Interrupted, RenderControl
 
-__all__ = ["PIECE", "in_parallel", "in_rounds", "split"]
+__all__ = ["PIECE", "in_order", "in_parallel", "in_rounds", "split"]
 
 T = TypeVar("T")
 R = TypeVar("R")
@@ -45,27 +46,7 @@ def in_parallel(threads: int, work: Callable[[T], R], items: Sequence[T],
     :class:`~pathspace.estimators.control.Interrupted` is raised (a render
     stopped by its deadline or a signal raises Interrupted).
     """
-    if threads <= 1 or len(items) <= 1:
-        return [work(item) for item in items]
-    pool = ThreadPoolExecutor(min(threads, len(items)))
-    try:
-        futures = [pool.submit(work, item) for item in items]
-        wait(futures, return_when=FIRST_EXCEPTION)
-        failures = [f.exception() for f in futures if f.done() and f.exception() is not None]
-        errors = [e for e in failures if not isinstance(e, Interrupted)]
-        if errors and control is not None:
-            control.cancel(f"a worker failed: {errors[0]!r}")
-        wait(futures)
-    except BaseException:
-        if control is not None:
-            control.cancel("interrupted")
-        raise
-    finally:
-        pool.shutdown(wait=True, cancel_futures=True)
-    failures = [f.exception() for f in futures if f.exception() is not None]
-    if failures:
-        raise next((e for e in failures if not isinstance(e, Interrupted)), failures[0])
-    return [f.result() for f in futures]
+    return [result for _, result in in_order(threads, work, items, control, ahead=len(items))]
 
 
 def in_rounds(threads: int, work: Callable[[T], R], items: Iterable[T],
@@ -79,3 +60,62 @@ def in_rounds(threads: int, work: Callable[[T], R], items: Iterable[T],
     for first in range(0, len(pending), size):
         round_items = pending[first:first + size]
         yield from zip(round_items, in_parallel(threads, work, round_items, control))
+
+
+def in_order(threads: int, work: Callable[[T], R], items: Iterable[T], control: RenderControl | None = None,
+             ahead: int | None = None) -> Iterator[tuple[T, R]]:
+    """``(item, work(item))`` in item order, computed on up to ``threads`` threads as they come free.
+
+    Unlike :func:`in_rounds`, a long item does not hold the others back: an item starts as soon as a thread is
+    free and fewer than ``ahead`` items (default: twice the threads) are running or done but not yet consumed,
+    so at most ``ahead`` results are held at once.  Items must not share state.  Failures are handled as in
+    :func:`in_parallel`, as soon as a call fails rather than when its turn comes; a caller that stops early
+    (Ctrl-C, or closing the iterator) cancels ``control`` too.
+    """
+    pending = list(items)
+    if threads <= 1 or len(pending) <= 1:
+        for item in pending:
+            yield item, work(item)
+        return
+    ahead = max(ahead if ahead is not None else 2 * threads, threads)
+    pool = ThreadPoolExecutor(min(threads, len(pending)))
+    running: deque[tuple[T, Future]] = deque()
+    submitted, failure = 0, None
+    try:
+        while failure is None and (running or submitted < len(pending)):
+            while submitted < len(pending) and len(running) < ahead:
+                running.append((pending[submitted], pool.submit(work, pending[submitted])))
+                submitted += 1
+            futures = [future for _, future in running]
+            while not futures[0].done() and not _failed(futures):
+                wait([future for future in futures if not future.done()], return_when=FIRST_COMPLETED)
+            if _failed(futures):
+                failure = _first_failure(futures, control)
+            else:
+                item, future = running.popleft()
+                yield item, future.result()
+    except BaseException:
+        if control is not None:
+            control.cancel("interrupted")
+        raise
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+    if failure is not None:
+        raise failure
+
+
+def _failed(futures: list[Future]) -> bool:
+    """Whether one of ``futures`` has ended with an exception."""
+    return any(f.done() and f.exception() is not None for f in futures)
+
+
+def _first_failure(futures: list[Future], control: RenderControl | None) -> BaseException:
+    """Some of ``futures`` failed: cancel ``control`` if one failed other than by an interruption, wait for them
+    all, and return the first failure other than an interruption (else the first interruption)."""
+    failures = [f.exception() for f in futures if f.done() and f.exception() is not None]
+    errors = [e for e in failures if not isinstance(e, Interrupted)]
+    if errors and control is not None:
+        control.cancel(f"a worker failed: {errors[0]!r}")
+    wait(futures)
+    failures = [f.exception() for f in futures if f.exception() is not None]
+    return next((e for e in failures if not isinstance(e, Interrupted)), failures[0])
