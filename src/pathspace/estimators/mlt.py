@@ -110,6 +110,9 @@ class PathChains(Splatting):
         self.weights = estimator.weights
         self.paths, self.values = start.paths, start.values
         self.f = contribution(self.values.f)
+        # p_m(x) of the current paths: it changes only where a bidirectional mutation is accepted (perturbations
+        # keep what it depends on), so it is kept rather than recomputed every step.
+        self.odds = mutation_odds(self.weights, self.paths, self.values)
         self.current = Proposal(np.arange(self.paths.count), self.values.pixel, self.values.f)
         camera = space.scene.camera
         self.lens_radius = (LENS_RADIUS, max(LENS_RADIUS, LENS_FRACTION * max(camera.width, camera.height)))
@@ -127,8 +130,7 @@ class PathChains(Splatting):
         """One mutation of every chain, splatting into ``image`` (3, pixels)."""
         n = self.paths.count
         u = self.uniforms(2 * n).reshape(2, n)
-        odds = mutation_odds(self.weights, self.paths, self.values)
-        kind = choose(odds, u[0])
+        kind = choose(self.odds, u[0])
         f_new, accept_p = np.zeros(n), np.zeros(n)
         value, pixel = np.zeros((3, n)), np.zeros(n, np.int64)
         proposals = {}
@@ -137,8 +139,10 @@ class PathChains(Splatting):
             # Slots the paths and their proposals can use (a bidirectional mutation adds at most ADD_SPREAD).
             slots = min(self.paths.slots, int(self.paths.k[lanes].max()) + 1 + ADD_SPREAD)
             proposed = self._mutate(int(code), self.paths.take(lanes, slots), self.values.take(lanes, slots))
+            odds = None
             if code == 0:
-                proposed.ratio = proposed.ratio * choice_ratio(self.weights, odds[0].take(lanes), proposed)
+                odds = mutation_odds(self.weights, proposed.paths, proposed.values)
+                proposed.ratio = proposed.ratio * choice_ratio(np.take(self.odds, lanes, axis=1), odds)
             c = self.contribution(proposed.values.f)
             finite = np.isfinite(proposed.values.f).all(axis=0) & np.isfinite(c)
             counters.nonfinite_contributions += int(finite.size - np.count_nonzero(finite))
@@ -148,15 +152,17 @@ class PathChains(Splatting):
             f_new[lanes], accept_p[lanes] = c, np.where(c > 0, a, 0.0)
             value[:, lanes] = np.where(finite, proposed.values.f, 0.0)
             pixel[lanes] = proposed.values.pixel
-            proposals[int(code)] = (lanes, proposed)
+            proposals[int(code)] = (lanes, proposed, odds)
         self.propose(image, Proposal(np.arange(n), pixel, value), f_new, accept_p)
         accept = u[1] < accept_p
         self.settle(image, accept, kind, MUTATIONS)
-        for lanes, proposed in proposals.values():
+        for lanes, proposed, odds in proposals.values():
             taken = np.flatnonzero(accept.take(lanes))
             if taken.size:
                 self.paths.assign(lanes.take(taken), proposed.paths.take(taken))
                 self.values.assign(lanes.take(taken), proposed.values.take(taken))
+                if odds is not None:
+                    self.odds[:, lanes.take(taken)] = np.take(odds, taken, axis=1)
         self.f = np.where(accept, f_new, self.f)
         self.current = Proposal(np.arange(n), self.values.pixel, self.values.f)
 
@@ -177,10 +183,10 @@ def choose(odds: np.ndarray, u: np.ndarray) -> np.ndarray:
     return np.minimum(below, last)
 
 
-def choice_ratio(weights: np.ndarray, odds_x: np.ndarray, proposed: Proposed) -> np.ndarray:
+def choice_ratio(odds_x: np.ndarray, odds_y: np.ndarray) -> np.ndarray:
     """p_b(y) / p_b(x) of bidirectional mutations x -> y: the reverse move is chosen at y with y's odds
-    (``odds_x``: p_b(x))."""
-    return mutation_odds(weights, proposed.paths, proposed.values)[0] / odds_x
+    (``odds_x``, ``odds_y``: :func:`mutation_odds` of x and y)."""
+    return odds_y[0] / odds_x[0]
 
 
 def _mutation_weight(value, name):
@@ -205,10 +211,10 @@ class MLT(Estimator):
     bootstrap: int = parameter(1 << 14, "independent samples per path length (pairs of a light and a camera "
                                         "walk, joined in every way) that estimate its brightness and the chains' "
                                         "starting paths", partial(integer, low=1))
-    bidirectional: float = parameter(0.4, "weight of the bidirectional mutation (must be > 0: it alone reaches "
+    bidirectional: float = parameter(0.3, "weight of the bidirectional mutation (must be > 0: it alone reaches "
                                            "every path)", _mutation_weight)
-    lens: float = parameter(0.25, "weight of the lens perturbation", _mutation_weight)
-    caustic: float = parameter(0.25, "weight of the caustic perturbation", _mutation_weight)
+    lens: float = parameter(0.5, "weight of the lens perturbation", _mutation_weight)
+    caustic: float = parameter(0.1, "weight of the caustic perturbation", _mutation_weight)
     multichain: float = parameter(0.1, "weight of the multi-chain perturbation", _mutation_weight)
     contribution: str = parameter("luminance", "the scalar the chains sample: 'luminance' (Y), 'xyz' (X + Y + Z) "
                                                "or 'max' (largest channel)", partial(choice, options=CONTRIBUTIONS))

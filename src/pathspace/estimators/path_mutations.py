@@ -244,10 +244,10 @@ class FreshPaths:
 
 def fresh_paths(space: Space, length: np.ndarray, slots: int, uniforms: Uniforms) -> FreshPaths:
     """Paths of ``length`` (pairs,) segments from independent pairs of walks, BDPT's way for one length
-    (Veach 1997, sec. 10.2): for each pair of a light walk (a light point and L - 1 vertices) and a camera walk (L vertices from the
-    pinhole through a uniform film position), the L + 1 paths made of the first j light-walk vertices and the
-    first L - j camera-walk vertices, joined by a shadow ray (j = 0: the camera walk found a light).  Each
-    path's ``density`` sums its densities over the L + 1 splits (:func:`split_densities`), so f / density
+    (Veach 1997, sec. 10.2): for each pair of a light walk (a light point and L - 1 vertices) and a camera walk
+    (L vertices from the pinhole through a uniform film position), the L + 1 paths made of the first j light-walk
+    vertices and the first L - j camera-walk vertices, joined by a shadow ray (j = 0: the camera walk found a
+    light).  Each path's ``density`` sums its densities over the L + 1 splits (:func:`split_densities`), so f / density
     is the multi-sample balance-heuristic weight (Veach 1997, sec. 9.2) and summed over a pair's paths
     estimates the energy b_L of paths of length L -- with L + 1 times less variance than one split chosen at
     random for paths only one split makes (a caustic seen through glass: only j = 0)."""
@@ -345,15 +345,17 @@ def _exponential(u: np.ndarray, low: float, high: float) -> np.ndarray:
 
 def _specular_run(xv: PathValues, k: np.ndarray, below: np.ndarray) -> np.ndarray:
     """The largest non-specular vertex index < ``below`` of each path (vertex 0, the light, never is)."""
-    slot = np.arange(xv.delta.shape[1])[None, :]
-    return np.where(~xv.delta & (slot < below[:, None]), slot, -1).max(axis=1)
+    slots = xv.delta.shape[1]
+    candidate = ~xv.delta & (np.arange(slots)[None, :] < below[:, None])
+    return np.where(candidate.any(axis=1), slots - 1 - np.argmax(candidate[:, ::-1], axis=1), -1)
 
 
 def _lobes(x: Paths, lanes: np.ndarray, slots: np.ndarray) -> np.ndarray:
     """The lobe numbers (n, steps) of the specular vertices at ``slots`` (n, steps; -1: none) of paths ``lanes``."""
-    safe = np.clip(slots, 1, max(x.slots - 2, 1))
-    rows = lanes[:, None]
-    numbers = lobe_numbers(x.p[:, rows, safe - 1], x.p[:, rows, safe], x.p[:, rows, safe + 1], x.n[:, rows, safe])
+    at = lanes[:, None] * x.slots + np.clip(slots, 1, max(x.slots - 2, 1))   # flat (path, slot) positions
+    p, n = x.p.reshape(3, -1), x.n.reshape(3, -1)
+    numbers = lobe_numbers(np.take(p, at - 1, axis=1), np.take(p, at, axis=1), np.take(p, at + 1, axis=1),
+                           np.take(n, at, axis=1))
     return np.where(slots >= 1, numbers, 0.0)
 
 
