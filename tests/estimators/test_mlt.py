@@ -244,6 +244,13 @@ def test_bad_parameters_name_the_field(params, field):
         ps.render(scene("cornell-box"), "mlt", spp=1, **{"max_depth": 8, **params})
 
 
+def test_chains_of_one_segment_paths():
+    """max_depth 1 and no direct pass: the chains sample the light seen directly (paths without a scattering
+    vertex, which the perturbations look up the lobes of)."""
+    r = ps.render(scene("cornell-box", (8, 8)), "mlt", spp=2, seed=3, max_depth=1, direct=0, chains=64, bootstrap=256)
+    assert np.isfinite(r.image).all() and r.image.max() > 0 and r.stats["metropolis"]["mutations"] == 2 * 64
+
+
 def test_direct_defaults_to_four_segments_or_fewer_than_max_depth():
     assert MLT().direct == 4 and MLT(max_depth=3).direct == 2 and MLT(max_depth=3, direct=0).direct == 0
     assert "paths of at most 4 segments by BDPT" in " ".join(MLT(max_depth=10).plan(scene("cornell-box")))
@@ -419,7 +426,7 @@ def test_state_dependent_choice_keeps_the_target_distribution(monkeypatch):
     assert rank >= 12, rank
     critical = stats.chi2.isf(ALPHA, rank)
     assert chi2 < critical, (chi2, critical)
-    monkeypatch.setattr(mlt_module, "choice_ratio", lambda odds_x, odds_y: np.ones_like(odds_x[0]))
+    monkeypatch.setattr(mlt_module, "choice_ratio", lambda p_x, p_y: np.ones_like(p_x))
     wrong, wrong_rank = chain_step_chi2()
     assert wrong > stats.chi2.isf(ALPHA, wrong_rank), (wrong, chi2, critical)
 

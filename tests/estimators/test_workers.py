@@ -132,3 +132,23 @@ def test_a_caller_that_stops_early_cancels_the_render():
     assert next(results) == (0, 0)
     results.close()
     assert control.cancelled
+    control = RenderControl()
+    results = in_order(2, lambda k: k, range(6), control)
+    assert [k for k, _ in zip(range(6), results)] == list(range(6))
+    results.close()                  # closed after its last result: nothing was left to stop
+    assert not control.cancelled
+
+
+def test_items_not_started_when_one_fails_never_start():
+    started = []
+
+    def work(k: int) -> int:
+        started.append(k)
+        if k == 0:
+            raise RuntimeError("piece 0 failed")
+        time.sleep(0.2)
+        return k
+
+    with pytest.raises(RuntimeError, match="piece 0 failed"):
+        in_parallel(2, work, list(range(8)))
+    assert len(started) <= 3, started    # item 0, the one running beside it, at most one more before the cancel

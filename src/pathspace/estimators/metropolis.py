@@ -371,8 +371,10 @@ def step_groups(job: RenderJob, groups: Sequence[Splatting], steps: int,
     ``steps``.  ``others``: more pieces of the pass (images made with the given counters, e.g. path-space MLT's
     BDPT pass of the direct paths), added in their order.  All pieces, groups first, run on the render's threads
     as the threads come free (:func:`~pathspace.estimators.workers.in_order`): a pass of one group of chains and
-    one range of direct pixels keeps two threads busy.  What the pieces count joins ``job.counters``, also when the
-    render is interrupted."""
+    one range of direct pixels keeps two threads busy.  Up to twice the threads' images are held at once (finished
+    pieces wait for the one before them), so that the other threads can render several ranges of direct pixels
+    while one steps the chains.  What the pieces count joins ``job.counters``, also when the render is
+    interrupted."""
     def walk(g: int, counters: Counters) -> np.ndarray:
         image = np.zeros((job.film.channels, job.film.pixel_count))
         for _ in range(steps):

@@ -67,10 +67,12 @@ def in_order(threads: int, work: Callable[[T], R], items: Iterable[T], control: 
     """``(item, work(item))`` in item order, computed on up to ``threads`` threads as they come free.
 
     Unlike :func:`in_rounds`, a long item does not hold the others back: an item starts as soon as a thread is
-    free and fewer than ``ahead`` items (default: twice the threads) are running or done but not yet consumed,
-    so at most ``ahead`` results are held at once.  Items must not share state.  Failures are handled as in
-    :func:`in_parallel`, as soon as a call fails rather than when its turn comes; a caller that stops early
-    (Ctrl-C, or closing the iterator) cancels ``control`` too.
+    free and fewer than ``ahead`` items (default: twice the threads; at least the threads) are running or done
+    but not yet consumed, so at most ``ahead`` results are held at once.  Items must not share state.  Failures
+    are handled as in :func:`in_parallel`, as soon as a call fails rather than when its turn comes, and items
+    not started by then never start.  On more than one thread, a caller that stops while items remain (Ctrl-C,
+    or closing the iterator) cancels ``control`` too, so that the threads stop at their next check; on one
+    thread the items run in the caller's thread, one per result asked for.
     """
     pending = list(items)
     if threads <= 1 or len(pending) <= 1:
@@ -95,7 +97,7 @@ def in_order(threads: int, work: Callable[[T], R], items: Iterable[T], control: 
                 item, future = running.popleft()
                 yield item, future.result()
     except BaseException:
-        if control is not None:
+        if control is not None and (running or submitted < len(pending)):
             control.cancel("interrupted")
         raise
     finally:
@@ -110,12 +112,19 @@ def _failed(futures: list[Future]) -> bool:
 
 
 def _first_failure(futures: list[Future], control: RenderControl | None) -> BaseException:
-    """Some of ``futures`` failed: cancel ``control`` if one failed other than by an interruption, wait for them
-    all, and return the first failure other than an interruption (else the first interruption)."""
-    failures = [f.exception() for f in futures if f.done() and f.exception() is not None]
-    errors = [e for e in failures if not isinstance(e, Interrupted)]
-    if errors and control is not None:
-        control.cancel(f"a worker failed: {errors[0]!r}")
+    """Some of ``futures`` failed: the ones not started never start; ``control`` is cancelled as soon as one has
+    failed other than by an interruption (before and after waiting for the running ones); returns the first
+    failure other than an interruption (else the first interruption)."""
+    for future in futures:
+        future.cancel()
+
+    def failures() -> list[BaseException]:
+        found = [f.exception() for f in futures if f.done() and not f.cancelled() and f.exception() is not None]
+        errors = [e for e in found if not isinstance(e, Interrupted)]
+        if errors and control is not None and not control.cancelled:
+            control.cancel(f"a worker failed: {errors[0]!r}")
+        return errors + [e for e in found if isinstance(e, Interrupted)]
+
+    failures()
     wait(futures)
-    failures = [f.exception() for f in futures if f.exception() is not None]
-    return next((e for e in failures if not isinstance(e, Interrupted)), failures[0])
+    return failures()[0]
