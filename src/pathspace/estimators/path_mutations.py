@@ -354,7 +354,7 @@ def _lobes(x: Paths, lanes: np.ndarray, slots: np.ndarray) -> np.ndarray:
     """The lobe numbers (n, steps) of the specular vertices at ``slots`` (n, steps; -1: none) of paths ``lanes``."""
     if x.slots < 3:   # paths of at most one segment have no scattering vertex
         return np.zeros(slots.shape)
-    at = lanes[:, None] * x.slots + np.clip(slots, 1, max(x.slots - 2, 1))   # flat (path, slot) positions
+    at = lanes[:, None] * x.slots + np.clip(slots, 1, x.slots - 2)   # flat (path, slot) positions
     p, n = x.p.reshape(3, -1), x.n.reshape(3, -1)
     numbers = lobe_numbers(np.take(p, at - 1, axis=1), np.take(p, at, axis=1), np.take(p, at + 1, axis=1),
                            np.take(n, at, axis=1))
