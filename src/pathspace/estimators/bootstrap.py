@@ -32,16 +32,10 @@ from .control import RenderControl
 from .primary import ChainStates, Uniforms
 from .workers import in_rounds
 
-__all__ = ["BATCH", "CHAINS_PER_START", "GROUPS", "BootstrapResult", "Strata", "allocate", "bootstrap",
-           "reservoir_draw", "second_stage_sizes"]
+__all__ = ["BATCH", "GROUPS", "BootstrapResult", "Strata", "allocate", "bootstrap", "reservoir_draw"]
 
 BATCH = 1 << 14   # bootstrap samples evaluated together
 GROUPS = 8        # independent replicates for the standard error
-# A class whose bootstrap gives fewer effective distinct starts than one per this many chains is clumped: chains
-# that start at the same sample stay together until their mutations spread them (second_stage_sizes).  With 2, and
-# path-space MLT's second stage of up to 16x, 30-s renders of the pool had 4.8x less error; with 8, 5.4x; on the
-# ajar door 17% and 9% less (README, "Two bootstrap stages").
-CHAINS_PER_START = 2
 
 
 @dataclass
@@ -222,14 +216,3 @@ def allocate(brightness: np.ndarray, chains: int) -> np.ndarray:
     while count.sum() > chains and (count > 1).any():
         count[np.argmax(np.where(count > 1, count - share, -np.inf))] -= 1
     return count
-
-
-def second_stage_sizes(effective: np.ndarray, chains: np.ndarray, first: int, least: int, most: int) -> np.ndarray:
-    """Samples of each class's second bootstrap stage (path-space MLT's path lengths): ``least``, or more -- up
-    to ``most`` -- where the first stage's ``effective`` starts (Kish's (sum c)^2 / sum c^2 over its ``first``
-    samples), growing in proportion to the samples, would leave fewer than one per :data:`CHAINS_PER_START` of
-    the class's ``chains``.  A class whose first stage found nothing keeps ``least``."""
-    wanted = chains / CHAINS_PER_START
-    with np.errstate(divide="ignore", invalid="ignore"):
-        needed = np.where(effective > 0, np.ceil(first * wanted / effective) - first, 0.0)
-    return np.clip(needed, least, max(least, most)).astype(np.int64)

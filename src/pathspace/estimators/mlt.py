@@ -29,32 +29,15 @@ renders them with BDPT (``max_depth = direct``, one sample per pixel), and
 the chains sample only longer paths, where exploring pays.
 
 Normalisation and start (sec. 11.3.1).  Each path length L (``direct`` + 1
-.. ``max_depth``) is a class with at least ``bootstrap`` independent samples,
-each a pair of a light walk and a camera walk joined in all L + 1 ways, as
-BDPT does (:func:`~pathspace.estimators.path_mutations.fresh_paths`): the
-paths, weighted by f / sum_j p_j, estimate the energy b_L of paths of length
-L (multi-sample balance heuristic).  Chains are shared out in proportion to
-b_L and start at paths drawn in proportion to c(f) / sum_j p_j; each chain's
-splats are scaled by P b_L / (chains of its length), as in
+.. ``max_depth``) is a class with ``bootstrap`` independent samples, each a
+pair of a light walk and a camera walk joined in all L + 1 ways, as BDPT
+does (:func:`~pathspace.estimators.path_mutations.fresh_paths`): the paths,
+weighted by f / sum_j p_j, estimate the energy b_L of paths of length L
+(multi-sample balance heuristic).  Chains are shared out in
+proportion to b_L and start at paths drawn in proportion to c(f) / sum_j p_j;
+each chain's splats are scaled by P b_L / (chains of its length), as in
 :mod:`pathspace.estimators.metropolis`, whose expected-value splatting and
 statistics it shares.  Chains change length freely.
-
-The bootstrap runs in two stages, so that a length whose light is found by
-few, heavy samples (the pool's E S D D S L) gets enough distinct starts.
-Chains that start at the same path stay together until the mutations spread
-them: hundreds of chains on each of a few paths render as bright blotches.
-A first stage of ``bootstrap`` / 2 samples per length measures the effective
-number of distinct starts, (sum c)^2 / sum c^2 (Kish), and the second stage
-takes the other half of ``bootstrap``, or more -- up to ``bootstrap_extend``
-times ``bootstrap`` in all -- where the first stage predicts fewer than one
-effective start per
-:data:`~pathspace.estimators.bootstrap.CHAINS_PER_START` chains.  The second
-stage's size depends on the first, so the mean of all the samples would be
-biased (a first stage that missed the heavy samples stops early and keeps its
-low estimate); instead b_L = (b_first + b_second) / 2: each stage is unbiased
-given the first, so the mix is, and without an extension it has the variance
-of one stage of ``bootstrap`` samples.  The starts are drawn from both
-stages.
 
 Spectral renders carry each path's wavelengths as one more number of the
 state (moved by a small step with every bidirectional mutation).  Scope:
@@ -75,7 +58,7 @@ from ..lights.area import AreaLight
 from .base import Budget, Counters, Estimator, RenderJob, parameter
 from .bdpt import BDPT
 from .bidirectional import STREAMS
-from .bootstrap import BATCH, GROUPS, allocate, reservoir_draw, second_stage_sizes
+from .bootstrap import BATCH, GROUPS, allocate, reservoir_draw
 from .control import Interrupted, RenderControl
 from .metropolis import (CHAINS, CONTRIBUTIONS, Proposal, Splatting, chain_statistics, contribution_function,
                          run_passes, step_groups, uniform_stream)
@@ -97,9 +80,6 @@ LENS_FRACTION = 0.05
 # Paths of at most this many segments go to BDPT by default: on the caustic and ajar-door scenes (benchmarks/mlt.py,
 # 128 x 128, max_depth 10) time to relMSE 1e-2 is 2.4x and 0.71x BDPT's with 4, 13x and 0.96x with Veach's 2.
 DIRECT = 4
-# The bootstrap's first stage is this share of ``bootstrap`` per length; a length whose first stage predicts too
-# few effective starts for its chains gets a longer second stage (module docstring, bootstrap.second_stage_sizes).
-FIRST_SHARE = 1 / 2
 CAUSTIC_ANGLE = (1e-4, 0.1)   # theta1, theta2 of the caustic perturbation, radians (Veach 1997, sec. 11.4.4)
 # Random streams of a render (the first number of each unit key).
 _BOOTSTRAP, _CHAINS, _DIRECT = 0, 1, 2
@@ -107,22 +87,20 @@ _BOOTSTRAP, _CHAINS, _DIRECT = 0, 1, 2
 
 @dataclass
 class Bootstrap:
-    """Per path length (class): ``brightness`` b_L, its ``standard_error``, the ``samples`` taken and the
-    ``effective_starts`` among them; the chains' starting paths, their values and ``label`` (class)."""
+    """Per path length (class): ``brightness`` b_L, its ``standard_error``; the chains' starting paths, their
+    values and ``label`` (class)."""
 
     brightness: np.ndarray
     standard_error: np.ndarray
     paths: Paths
     values: PathValues | None      # None without chains
     label: np.ndarray
-    samples: np.ndarray | None = None
-    effective_starts: np.ndarray | None = None
 
     def part(self, chains: slice) -> "Bootstrap":
-        """The starts of the chains ``chains`` (the brightness and the counts are the whole render's)."""
+        """The starts of the chains ``chains`` (the brightness is the whole render's)."""
         lanes = np.arange(chains.start, chains.stop)
         return Bootstrap(self.brightness, self.standard_error, self.paths.take(lanes), self.values.take(lanes),
-                         self.label[chains], self.samples, self.effective_starts)
+                         self.label[chains])
 
 
 class PathChains(Splatting):
@@ -235,10 +213,7 @@ class MLT(Estimator):
                                     "render's threads", partial(integer, low=1))
     bootstrap: int = parameter(1 << 14, "independent samples per path length (pairs of a light and a camera "
                                         "walk, joined in every way) that estimate its brightness and the chains' "
-                                        "starting paths, at least", partial(integer, low=1))
-    bootstrap_extend: int = parameter(16, "a path length whose bootstrap's first half finds too few distinct "
-                                          "starting paths for its chains takes up to this many times bootstrap samples "
-                                          "(1: never more than bootstrap)", partial(integer, low=1))
+                                        "starting paths", partial(integer, low=1))
     bidirectional: float = parameter(0.3, "weight of the bidirectional mutation (must be > 0: it alone reaches "
                                            "every path)", _mutation_weight)
     lens: float = parameter(0.5, "weight of the lens perturbation", _mutation_weight)
@@ -273,8 +248,7 @@ class MLT(Estimator):
         w = self.weights
         lines = [f"path-space MLT (Veach & Guibas 1997): {self.chains} chains over paths of {self.direct + 1} .. "
                  f"{self.max_depth} segments, started from {self.bootstrap} bootstrap samples (pairs of walks) per "
-                 f"length (up to {self.bootstrap_extend}x as many where the starts would be clumped) in proportion "
-                 f"to the {self.contribution}; mutation weights (each chain chooses among "
+                 f"length in proportion to the {self.contribution}; mutation weights (each chain chooses among "
                  f"those that can move its path): bidirectional {w[0]:.2f}, lens perturbation {w[1]:.2f}, caustic "
                  f"perturbation {w[2]:.2f}, multi-chain perturbation {w[3]:.2f}; expected-value splatting"]
         if self.direct:
@@ -314,8 +288,7 @@ class MLT(Estimator):
         except Interrupted:
             return
         direct = self.direct_estimator if job.scene.lights.count else None
-        stats.update(bootstrap=self.bootstrap, class_bootstrap=boot.samples.tolist(),
-                     class_effective_starts=boot.effective_starts.tolist(), brightness=float(boot.brightness.sum()),
+        stats.update(bootstrap=self.bootstrap, brightness=float(boot.brightness.sum()),
                      brightness_standard_error=float(np.sqrt((boot.standard_error ** 2).sum())),
                      brightness_degrees_of_freedom=GROUPS - 1,
                      class_brightness=boot.brightness.tolist(),
@@ -354,15 +327,12 @@ class MLT(Estimator):
 
     def _bootstrap(self, space: Space, contribution, streams, counters: Counters, control: RenderControl,
                    threads: int) -> Bootstrap:
-        """b_L with its standard error per path length, and the chains' starts, from two stages
-        (see the module docstring); ``streams(key)``: the random numbers of the reservoirs (key ``()``) and of
-        each batch of walks (``(stage, length, batch)``), whose walks are made ``threads`` batches at a time."""
+        """b_L with its standard error per path length, and the chains' starts (see the module docstring);
+        ``streams(key)``: the random numbers of the reservoirs (key ``()``) and of each batch of walks (``(length,
+        batch)``), whose walks are made ``threads`` batches at a time."""
         first = self.direct + 1
         classes = self.max_depth - first + 1
-        lit = range(classes) if space.scene.lights.count else range(0)
         uniforms = streams(())
-        reservoirs = [{"total": 0.0, "paths": None} for _ in range(classes)]
-        squares = np.zeros(classes)          # sum of c^2 over both stages, for the effective starts
 
         def walk(batch: tuple[int, int, int, Uniforms]) -> tuple[FreshPaths, np.ndarray, int]:
             label, start, count, draw = batch
@@ -373,42 +343,24 @@ class MLT(Estimator):
             finite = np.isfinite(weighted).all(axis=0) & np.isfinite(c)
             return fresh, np.where(finite, c, 0.0), int(finite.size - np.count_nonzero(finite))
 
-        def stage(index: int, sizes: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-            """``sizes[L]`` samples of each length: b_L and its standard error from GROUPS group means."""
-            batches = []
-            for label in lit:
-                size = max(1, BATCH // (first + label + 1))      # pairs of walks; each makes length + 1 paths
-                batches += [(label, start, min(size, int(sizes[label]) - start), streams((index, label, start // size)))
-                            for start in range(0, int(sizes[label]), size)]
-            sums = np.zeros((classes, GROUPS))
-            for (label, start, _, _), (fresh, c, nonfinite) in in_rounds(threads, walk, batches, control):
-                counters.nonfinite_contributions += nonfinite
-                sums[label] += np.bincount((start + fresh.pair) % GROUPS, weights=c, minlength=GROUPS)
-                squares[label] += float(np.dot(c, c))
-                _keep(reservoirs[label], c, fresh.paths, self.chains, uniforms)
-            brightness = sums.sum(axis=1) / sizes
-            standard_error = (sums / (sizes[:, None] / GROUPS)).std(axis=1, ddof=1) / np.sqrt(GROUPS)
-            return brightness, standard_error
+        batches = []
+        for label in range(classes if space.scene.lights.count else 0):
+            size = max(1, BATCH // (first + label + 1))      # pairs of walks; each makes length + 1 paths
+            batches += [(label, start, min(size, self.bootstrap - start), streams((label, start // size)))
+                        for start in range(0, self.bootstrap, size)]
+        sums = np.zeros((classes, GROUPS))
+        reservoirs = [{"total": 0.0, "paths": None} for _ in range(classes)]
+        for (label, start, _, _), (fresh, c, nonfinite) in in_rounds(threads, walk, batches, control):
+            counters.nonfinite_contributions += nonfinite
+            sums[label] += np.bincount((start + fresh.pair) % GROUPS, weights=c, minlength=GROUPS)
+            _keep(reservoirs[label], c, fresh.paths, self.chains, uniforms)
+        picks = [reservoir["paths"] for reservoir in reservoirs]
+        per_group = self.bootstrap / GROUPS
+        brightness = sums.sum(axis=1) / self.bootstrap
+        standard_error = (sums / per_group).std(axis=1, ddof=1) / np.sqrt(GROUPS)
+        return self._starts(space, brightness, standard_error, picks)
 
-        def effective_starts() -> np.ndarray:
-            totals = np.array([reservoir["total"] for reservoir in reservoirs])
-            with np.errstate(divide="ignore", invalid="ignore"):
-                return np.where(squares > 0, totals ** 2 / squares, 0.0)
-
-        first_size = max(1, round(self.bootstrap * FIRST_SHARE))
-        least = max(1, self.bootstrap - first_size)
-        b_first, se_first = stage(0, np.full(classes, first_size))
-        second = second_stage_sizes(effective_starts(), allocate(b_first, self.chains), first_size, least,
-                                    self.bootstrap * self.bootstrap_extend - first_size)
-        b_second, se_second = stage(1, second)
-        # A mix with weights fixed in advance: unbiased although the second stage's size depends on the first.
-        weight = first_size / (first_size + least)
-        brightness = weight * b_first + (1 - weight) * b_second
-        standard_error = np.hypot(weight * se_first, (1 - weight) * se_second)
-        return self._starts(space, brightness, standard_error, first_size + second, effective_starts(),
-                            [reservoir["paths"] for reservoir in reservoirs])
-
-    def _starts(self, space: Space, brightness, standard_error, samples, effective, picks: list) -> Bootstrap:
+    def _starts(self, space: Space, brightness, standard_error, picks: list) -> Bootstrap:
         """Share the chains out among the lengths and gather their starting paths."""
         from .paths import evaluate
 
@@ -427,7 +379,7 @@ class MLT(Estimator):
                 labels.append(np.full(count, label))
                 row += count
         return Bootstrap(brightness, standard_error, paths, evaluate(space, paths) if row else None,
-                         np.concatenate(labels) if labels else np.zeros(0, np.int64), samples, effective)
+                         np.concatenate(labels) if labels else np.zeros(0, np.int64))
 
 
 def _keep(reservoir: dict, c: np.ndarray, paths: Paths, slots: int, uniforms) -> None:
