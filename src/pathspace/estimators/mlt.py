@@ -26,7 +26,9 @@ As Veach recommends (sec. 11.5), short paths -- emitters seen directly and
 direct lighting, and by default everything up to ``direct`` = 4 segments,
 such as a caustic seen directly -- are not left to the chains: each pass
 renders them with BDPT (``max_depth = direct``, one sample per pixel), and
-the chains sample only longer paths, where exploring pays.
+the chains sample only longer paths, where exploring pays.  With
+``explore='specular'`` they sample only the longer paths with a specular
+vertex, and the BDPT pass (to ``max_depth``) renders the others.
 
 Normalisation and start (sec. 11.3.1).  Each path length L (``direct`` + 1
 .. ``max_depth``) is a class with ``bootstrap`` independent samples, each a
@@ -58,6 +60,7 @@ from ..lights.area import AreaLight
 from .base import Budget, Counters, Estimator, RenderJob, parameter
 from .bdpt import BDPT
 from .bidirectional import STREAMS
+from .connections import Batch, Contributions
 from .bootstrap import BATCH, GROUPS, allocate, reservoir_draw
 from .control import Interrupted, RenderControl
 from .metropolis import (CHAINS, CONTRIBUTIONS, Proposal, Splatting, chain_statistics, contribution_function,
@@ -69,9 +72,10 @@ from .paths import Paths, PathValues, Space
 from .primary import Uniforms
 from .workers import in_rounds, split
 
-__all__ = ["MLT", "PathChains", "choice_ratio", "choose", "mutation_odds"]
+__all__ = ["MLT", "PathChains", "choice_ratio", "choose", "mutation_odds", "explored"]
 
 MUTATIONS = ("bidirectional", "lens", "caustic", "multichain")
+EXPLORE = ("all", "specular")
 # r1 of the lens (and multi-chain) perturbation, pixels; r2 is LENS_FRACTION of the larger film side.  Veach's
 # 0.1 pixel and 10% gave 9-10% more error at 30 s than these on the 128 x 128 caustic and ajar-door scenes (every
 # seed of four; the pool the same; README, "Lens perturbation size").
@@ -192,6 +196,28 @@ def choice_ratio(bidirectional_x: np.ndarray, bidirectional_y: np.ndarray) -> np
     return bidirectional_y / bidirectional_x
 
 
+def explored(part: Contributions, batch: Batch, direct: int) -> np.ndarray:
+    """Whether each BDPT connection of ``part`` makes a path that chains with ``explore='specular'`` sample: more
+    than ``direct`` segments and a specular vertex among x_1 .. x_{k-1}.  Strategy (s, t) joins light vertices
+    y_0 .. y_{s-1} to camera vertices z_{t-1} .. z_0, so those are y_1 .. y_{s-1} and z_1 .. z_{t-1}, but for
+    z_{t-1} = x_0 when s = 0 (the camera subpath found the light)."""
+    light = batch.light.any_specular(part.lane, 1, part.s - 1)
+    camera = batch.eye.any_specular(part.lane, 1, np.where(part.s == 0, part.t - 2, part.t - 1))
+    return (part.s + part.t - 1 > direct) & (light | camera)
+
+
+@dataclass
+class _UnexploredBDPT(BDPT):
+    """BDPT over the paths that chains with ``explore='specular'`` leave out: those of at most ``direct``
+    segments, and the longer ones without a specular vertex (their connections' MIS weights set to 0: all the
+    strategies of a path agree on its class, so this is BDPT's estimate of the rest of path space)."""
+
+    direct: int = 0
+
+    def _weights(self, part: Contributions, batch: Batch) -> np.ndarray:
+        return np.where(explored(part, batch, self.direct), 0.0, super()._weights(part, batch))
+
+
 def _mutation_weight(value, name):
     return number(value, name, low=0.0, what="a weight >= 0")
 
@@ -221,6 +247,9 @@ class MLT(Estimator):
     multichain: float = parameter(0.1, "weight of the multi-chain perturbation", _mutation_weight)
     contribution: str = parameter("luminance", "the scalar the chains sample: 'luminance' (Y), 'xyz' (X + Y + Z) "
                                                "or 'max' (largest channel)", partial(choice, options=CONTRIBUTIONS))
+    explore: str = parameter("all", "which paths longer than direct the chains sample: 'all', or 'specular' (those "
+                                    "with a specular vertex; BDPT renders the others each pass, one sample per "
+                                    "pixel)", partial(choice, options=EXPLORE))
     lengths: Lengths = field(init=False, repr=False)
     direct_estimator: BDPT | None = field(init=False, repr=False)
 
@@ -235,7 +264,10 @@ class MLT(Estimator):
             raise ValueError(f"direct: expected fewer segments than max_depth = {self.max_depth} (the chains render "
                              f"lengths direct + 1 .. max_depth), got {self.direct!r}")
         self.lengths = Lengths(self.max_depth, self.direct + 1)
-        self.direct_estimator = BDPT(max_depth=self.direct) if self.direct else None
+        if self.explore == "specular":
+            self.direct_estimator = _UnexploredBDPT(max_depth=self.max_depth, direct=self.direct)
+        else:
+            self.direct_estimator = BDPT(max_depth=self.direct) if self.direct else None
 
     @property
     def weights(self) -> np.ndarray:
@@ -246,12 +278,18 @@ class MLT(Estimator):
     def plan(self, scene) -> list[str]:
         """What the chains explore and what BDPT renders."""
         w = self.weights
+        which = " with a specular vertex" if self.explore == "specular" else ""
         lines = [f"path-space MLT (Veach & Guibas 1997): {self.chains} chains over paths of {self.direct + 1} .. "
-                 f"{self.max_depth} segments, started from {self.bootstrap} bootstrap samples (pairs of walks) per "
-                 f"length in proportion to the {self.contribution}; mutation weights (each chain chooses among "
-                 f"those that can move its path): bidirectional {w[0]:.2f}, lens perturbation {w[1]:.2f}, caustic "
+                 f"{self.max_depth} segments{which}, started from {self.bootstrap} bootstrap samples (pairs of "
+                 f"walks) per length in proportion to the {self.contribution}; mutation weights (each chain chooses "
+                 f"among those that can move its path): bidirectional {w[0]:.2f}, lens perturbation {w[1]:.2f}, caustic "
                  f"perturbation {w[2]:.2f}, multi-chain perturbation {w[3]:.2f}; expected-value splatting"]
-        if self.direct:
+        if self.explore == "specular":
+            lines.append(f"paths of at most {self.direct} segments, and longer ones without a specular vertex, by "
+                         "BDPT, one sample per pixel per pass")
+            if not scene.materials.delta.any():
+                lines.append("no specular materials: the chains have no paths to sample, BDPT renders the image")
+        elif self.direct:
             lines.append(f"paths of at most {self.direct} segments by BDPT, one sample per pixel per pass")
         return lines
 
@@ -281,7 +319,7 @@ class MLT(Estimator):
         contribution = contribution_function(self.contribution, job.mode)
         stats = job.stats.setdefault("metropolis", {})
         try:
-            space = Space(job.scene, job.mode)
+            space = Space(job.scene, job.mode, specular_only=self.explore == "specular")
             boot = self._bootstrap(space, contribution,
                                    lambda key: uniform_stream(job, (_BOOTSTRAP, budget.first_pass) + key),
                                    job.counters, control, job.threads)

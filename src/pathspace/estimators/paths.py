@@ -65,10 +65,12 @@ _LOBE_NUMBERS = (0.0, 1.0 - 2.0 ** -20)   # the first BSDF number picking the fi
 @dataclass
 class Space:
     """What paths live in: the ``scene`` and the colour ``mode`` (RGB, or spectral with the path's wavelengths
-    drawn from one number per path, :attr:`Paths.wavelength_number`)."""
+    drawn from one number per path, :attr:`Paths.wavelength_number`).  With ``specular_only``, paths without
+    a specular vertex have f = 0: they are left to another estimator (a partition of path space)."""
 
     scene: object
     mode: object = field(default_factory=RGBMode)
+    specular_only: bool = False
 
     @property
     def spectral(self) -> bool:
@@ -228,7 +230,7 @@ def _scattering(scene, colours, material: np.ndarray, n: np.ndarray, to_prev: np
 
 def evaluate(space: Space, paths: Paths) -> PathValues:
     """f(x) as film values, the film position and the vertex densities of every path (see the module
-    docstring)."""
+    docstring); f = 0 for paths ``space`` leaves out."""
     scene = space.scene
     state, colours = space.colours(paths.wavelength_number)
     count, slots = paths.material.shape
@@ -284,7 +286,10 @@ def evaluate(space: Space, paths: Paths) -> PathValues:
     segments = np.where(on_path, np.divide(cos_start, dist2, out=np.zeros_like(dist2), where=dist2 > 0), 1.0)
     f *= segments.prod(axis=1) * pdf_camera
     raster, inside = camera.raster(paths.p[:, lanes, last])
-    f = np.where(inside & (k >= 1) & np.isfinite(f).all(axis=0), f, 0.0)
+    kept = inside & (k >= 1) & np.isfinite(f).all(axis=0)
+    if space.specular_only:
+        kept &= delta.any(axis=1)
+    f = np.where(kept, f, 0.0)
     if state is not None:     # spectral: the wavelengths' radiance as XYZ film values
         if terminated.any():
             space.mode.terminate_secondary(state, terminated)

@@ -37,6 +37,7 @@ and :data:`LIGHT_VERTEX`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -143,6 +144,18 @@ class Subpaths:
     def at(self, v: np.ndarray) -> "Vertices":
         """A view of vertices ``v`` (flat indices)."""
         return Vertices(self, v)
+
+    @cached_property
+    def _specular_before(self) -> np.ndarray:
+        """(V + 1,): how many of the flat vertices before each one are specular (delta)."""
+        return np.concatenate([[0], np.cumsum(self.delta)])
+
+    def any_specular(self, lane: np.ndarray, first: int, last: np.ndarray) -> np.ndarray:
+        """Whether any of vertices ``first`` .. ``last`` (inclusive; none where ``last`` < ``first``) of the
+        subpaths of ``lane`` is specular (delta)."""
+        start = self.offset.take(lane)
+        before = self._specular_before   # clipped: an empty range at the end of the last lane reads past it
+        return before.take(start + np.maximum(last + 1, first), mode="clip") > before.take(start + first, mode="clip")
 
 
 class Vertices:
