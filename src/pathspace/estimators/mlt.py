@@ -282,8 +282,8 @@ class MLT(Estimator):
         lines = [f"path-space MLT (Veach & Guibas 1997): {self.chains} chains over paths of {self.direct + 1} .. "
                  f"{self.max_depth} segments{which}, started from {self.bootstrap} bootstrap samples (pairs of "
                  f"walks) per length in proportion to the {self.contribution}; mutation weights (each chain chooses "
-                 f"among those that can move its path): bidirectional {w[0]:.2f}, lens perturbation {w[1]:.2f}, caustic "
-                 f"perturbation {w[2]:.2f}, multi-chain perturbation {w[3]:.2f}; expected-value splatting"]
+                 f"among those that can move its path): bidirectional {w[0]:.2f}, lens perturbation {w[1]:.2f}, "
+                 f"caustic perturbation {w[2]:.2f}, multi-chain perturbation {w[3]:.2f}; expected-value splatting"]
         if self.explore == "specular":
             lines.append(f"paths of at most {self.direct} segments, and longer ones without a specular vertex, by "
                          "BDPT, one sample per pixel per pass")
