@@ -10,8 +10,6 @@ within 0.5% of BDPT's beyond three standard errors.
 """
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 from scipy import stats
@@ -23,10 +21,9 @@ from pathspace.estimators.path_mutations import (Lengths, bidirectional, caustic
 from pathspace.estimators import mlt as mlt_module
 from pathspace.estimators.base import Counters
 from pathspace.estimators.metropolis import contribution_function
-from pathspace.estimators.mlt import MLT, Bootstrap, PathChains, _UnexploredBDPT, choose, mutation_odds
+from pathspace.estimators.mlt import MLT, Bootstrap, PathChains, choose, mutation_odds
 from pathspace.estimators.path_walks import unit
 from pathspace.estimators.paths import Space, evaluate
-from pathspace.estimators.subpaths import Subpaths
 from pathspace.vecmath import orthonormal_basis
 
 from .test_metropolis import (ALPHA, MAX_DEPTH, check_blocks, check_brightness, luminance, luminance_and_error,
@@ -37,8 +34,7 @@ MIXTURES = [("bidirectional", ALONE),
             ("lens", {**ALONE, "bidirectional": 0.5, "lens": 0.5}),
             ("caustic", {**ALONE, "bidirectional": 0.5, "caustic": 0.5}),
             ("multichain", {**ALONE, "bidirectional": 0.5, "multichain": 0.5}),
-            ("mixture", {}),
-            ("specular", {"explore": "specular"})]
+            ("mixture", {})]
 Y = np.array([0.2126, 0.7152, 0.0722])
 # Veach's direct lighting (paths of at most 2 segments by BDPT) rather than the default 4: the chains then carry
 # paths of 3 .. MAX_DEPTH segments, so that the renders test the mutations on short paths too.
@@ -226,6 +222,17 @@ def test_mlt_agrees_with_bdpt_slow(name, label, params):
         assert r.stats["metropolis"]["longest_rejection_run"] < 300
 
 
+@pytest.mark.slow
+def test_specular_exploration_agrees_with_bdpt_slow():
+    """explore='specular': chains on the paths with a specular vertex, BDPT on the others.  16 seeds: the chains'
+    part is noisier alone than with every path (12 seeds left the brightness error at 0.41%, above the 0.4% the
+    test of 0.5% needs)."""
+    results = mlt_renders("cornell-box-specular", {"explore": "specular", "bootstrap": 1 << 16}, 16, spp=64)
+    check_mlt_agreement(results, reference("cornell-box-specular"))
+    for r in results:
+        assert r.stats["metropolis"]["longest_rejection_run"] < 300
+
+
 def test_stats_and_acceptance_per_mutation():
     r = ps.render(scene("cornell-box-specular"), "mlt", spp=4, seed=1, max_depth=6, chains=1024, bootstrap=4096,
                   direct=DIRECT)
@@ -241,40 +248,6 @@ def test_stats_and_acceptance_per_mutation():
     assert "Metropolis: 1024 chains" in r.summary()
 
 
-def test_subpaths_know_where_they_are_specular():
-    """``Subpaths.any_specular``: whether a specular vertex lies in a range of each lane's vertices."""
-    delta = np.array([0, 1, 0, 0, 0, 1, 0, 0], bool)     # lane 0: vertices 0 .. 2, lane 1: 0 .. 4, lane 2: 0
-    fields = dict.fromkeys(f.name for f in dataclasses.fields(Subpaths))
-    sub = Subpaths(**{**fields, "offset": np.array([0, 3, 8, 8]), "delta": delta})
-    lane = np.array([0, 0, 0, 1, 1, 1, 1, 2])
-    last = np.array([0, 1, 2, 1, 2, 3, -1, -1])
-    assert sub.any_specular(lane, 1, last).tolist() == [False, True, True, False, True, True, False, False]
-    assert sub.any_specular(np.array([1, 1]), 3, np.array([3, 4])).tolist() == [False, False]
-
-
-def test_specular_exploration_splits_path_space_between_chains_and_bdpt():
-    """With explore='specular' the chains sample the paths with a specular vertex (f = 0 for the others) and BDPT
-    renders the rest: per path length, the bootstrap's energy of the chains' paths equals the energy BDPT leaves
-    out (the same seeds rendered with and without those paths).  A classification that disagreed between the two
-    (a vertex range off by one, one subpath forgotten) would count energy twice or not at all."""
-    s = scene("cornell-box-specular")
-    rng = np.random.default_rng(11)
-    for length in (3, 4):
-        count = 48000 // (length + 1)
-        chains = [Y @ fresh_paths(Space(s, specular_only=True), np.full(count, length), length + 1,
-                                  rng.random).weights().sum(axis=1) / count for _ in range(8)]
-        left_out = []
-        for seed in range(8):
-            full = ps.render(s, "bdpt", spp=256, seed=seed, max_depth=length)
-            rest = ps.render(s, _UnexploredBDPT(max_depth=length, direct=length - 1), spp=256, seed=seed)
-            left_out.append(luminance(full.image).mean() - luminance(rest.image).mean())
-        energy, error = np.mean(chains), np.std(chains, ddof=1) / np.sqrt(8)
-        bdpt, bdpt_error = np.mean(left_out), np.std(left_out, ddof=1) / np.sqrt(8)
-        z = (energy - bdpt) / np.hypot(error, bdpt_error)
-        assert abs(z) < stats.norm.isf(ALPHA / 4), (length, energy, bdpt, z)
-        assert np.hypot(error, bdpt_error) < 0.05 * energy, "too noisy to test"
-
-
 def test_specular_exploration_leaves_the_rest_to_bdpt():
     """On the specular box the chains hold only part of the energy; without specular materials they have none."""
     r = ps.render(scene("cornell-box-specular"), "mlt", spp=4, seed=2, max_depth=6, chains=1024, bootstrap=4096,
@@ -283,7 +256,7 @@ def test_specular_exploration_leaves_the_rest_to_bdpt():
                       direct=DIRECT)
     assert 0.1 < r.stats["metropolis"]["brightness"] / every.stats["metropolis"]["brightness"] < 0.9
     plan = " ".join(MLT(explore="specular").plan(scene("cornell-box")))
-    assert "longer ones without a specular vertex, by BDPT" in plan and "no specular materials" in plan
+    assert "longer ones without a specular vertex by BDPT" in plan and "no specular materials" in plan
     diffuse = ps.render(scene("cornell-box", (8, 8)), "mlt", spp=2, seed=3, max_depth=6, bootstrap=512,
                         explore="specular")
     assert diffuse.stats["metropolis"]["chains"] == 0 and diffuse.image.mean() > 0

@@ -1,11 +1,12 @@
 """Views of subpath vertices: what connections gather is the vertices' own data, however a view was narrowed."""
 from __future__ import annotations
 
+import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
 
-from pathspace.estimators.subpaths import FIELDS, Vertices
+from pathspace.estimators.subpaths import FIELDS, Subpaths, Vertices
 
 
 def test_narrowed_views_gather_the_vertices_own_fields():
@@ -22,3 +23,14 @@ def test_narrowed_views_gather_the_vertices_own_fields():
     for name in ("p", "fwd", "n", "q"):     # n and q were never gathered by the wider views
         np.testing.assert_array_equal(getattr(twice, name), np.take(fields[name], vertices, axis=-1))
     assert twice.size == 3 and "beta" not in twice.__dict__ and "n" not in view.__dict__
+
+
+def test_subpaths_know_where_they_are_specular():
+    """``Subpaths.any_specular``: whether a specular vertex lies in a range of each lane's vertices."""
+    delta = np.array([0, 1, 0, 0, 0, 1, 0, 0, 0, 1], bool)   # lane 0: vertices 0 .. 2, lane 1: 0 .. 4, lane 2: 0 .. 1
+    fields = dict.fromkeys(f.name for f in dataclasses.fields(Subpaths))
+    sub = Subpaths(**{**fields, "offset": np.array([0, 3, 8, 10]), "delta": delta})
+    lane = np.array([0, 0, 0, 1, 1, 1, 1, 2, 2])
+    last = np.array([0, 1, 2, 1, 2, 3, -1, 0, 1])
+    assert sub.any_specular(lane, 1, last).tolist() == [False, True, True, False, True, True, False, False, True]
+    assert sub.any_specular(np.array([1, 1]), 3, np.array([3, 4])).tolist() == [False, False]

@@ -60,19 +60,19 @@ from ..lights.area import AreaLight
 from .base import Budget, Counters, Estimator, RenderJob, parameter
 from .bdpt import BDPT
 from .bidirectional import STREAMS
-from .connections import Batch, Contributions
 from .bootstrap import BATCH, GROUPS, allocate, reservoir_draw
 from .control import Interrupted, RenderControl
 from .metropolis import (CHAINS, CONTRIBUTIONS, Proposal, Splatting, chain_statistics, contribution_function,
                          run_passes, step_groups, uniform_stream)
 from .parameters import or_none
+from .partition import UnexploredBDPT
 from . import path_mutations as mutations
 from .path_mutations import ADD_SPREAD, FreshPaths, Lengths, Proposed, fresh_paths
 from .paths import Paths, PathValues, Space
 from .primary import Uniforms
 from .workers import in_rounds, split
 
-__all__ = ["MLT", "PathChains", "choice_ratio", "choose", "mutation_odds", "explored"]
+__all__ = ["MLT", "PathChains", "choice_ratio", "choose", "mutation_odds"]
 
 MUTATIONS = ("bidirectional", "lens", "caustic", "multichain")
 EXPLORE = ("all", "specular")
@@ -196,28 +196,6 @@ def choice_ratio(bidirectional_x: np.ndarray, bidirectional_y: np.ndarray) -> np
     return bidirectional_y / bidirectional_x
 
 
-def explored(part: Contributions, batch: Batch, direct: int) -> np.ndarray:
-    """Whether each BDPT connection of ``part`` makes a path that chains with ``explore='specular'`` sample: more
-    than ``direct`` segments and a specular vertex among x_1 .. x_{k-1}.  Strategy (s, t) joins light vertices
-    y_0 .. y_{s-1} to camera vertices z_{t-1} .. z_0, so those are y_1 .. y_{s-1} and z_1 .. z_{t-1}, but for
-    z_{t-1} = x_0 when s = 0 (the camera subpath found the light)."""
-    light = batch.light.any_specular(part.lane, 1, part.s - 1)
-    camera = batch.eye.any_specular(part.lane, 1, np.where(part.s == 0, part.t - 2, part.t - 1))
-    return (part.s + part.t - 1 > direct) & (light | camera)
-
-
-@dataclass
-class _UnexploredBDPT(BDPT):
-    """BDPT over the paths that chains with ``explore='specular'`` leave out: those of at most ``direct``
-    segments, and the longer ones without a specular vertex (their connections' MIS weights set to 0: all the
-    strategies of a path agree on its class, so this is BDPT's estimate of the rest of path space)."""
-
-    direct: int = 0
-
-    def _weights(self, part: Contributions, batch: Batch) -> np.ndarray:
-        return np.where(explored(part, batch, self.direct), 0.0, super()._weights(part, batch))
-
-
 def _mutation_weight(value, name):
     return number(value, name, low=0.0, what="a weight >= 0")
 
@@ -265,7 +243,7 @@ class MLT(Estimator):
                              f"lengths direct + 1 .. max_depth), got {self.direct!r}")
         self.lengths = Lengths(self.max_depth, self.direct + 1)
         if self.explore == "specular":
-            self.direct_estimator = _UnexploredBDPT(max_depth=self.max_depth, direct=self.direct)
+            self.direct_estimator = UnexploredBDPT(max_depth=self.max_depth, direct=self.direct)
         else:
             self.direct_estimator = BDPT(max_depth=self.direct) if self.direct else None
 
@@ -285,8 +263,8 @@ class MLT(Estimator):
                  f"among those that can move its path): bidirectional {w[0]:.2f}, lens perturbation {w[1]:.2f}, "
                  f"caustic perturbation {w[2]:.2f}, multi-chain perturbation {w[3]:.2f}; expected-value splatting"]
         if self.explore == "specular":
-            lines.append(f"paths of at most {self.direct} segments, and longer ones without a specular vertex, by "
-                         "BDPT, one sample per pixel per pass")
+            short = f"paths of at most {self.direct} segments, and longer ones" if self.direct else "paths"
+            lines.append(f"{short} without a specular vertex by BDPT, one sample per pixel per pass")
             if not scene.materials.delta.any():
                 lines.append("no specular materials: the chains have no paths to sample, BDPT renders the image")
         elif self.direct:
@@ -311,8 +289,8 @@ class MLT(Estimator):
         scene.accel
 
     def render(self, job: RenderJob, budget: Budget, on_checkpoint=None) -> None:
-        """Bootstrap, then passes of ceil(pixels / chains) steps of every chain plus one BDPT pass of the direct
-        paths, until the budget is spent."""
+        """Bootstrap, then passes of ceil(pixels / chains) steps of every chain plus one BDPT pass of the paths
+        the chains leave out, until the budget is spent."""
         film, control = job.film, job.control
         control.deadline = budget.seconds
         pixels = film.pixel_count
@@ -348,8 +326,9 @@ class MLT(Estimator):
         stats.update(chain_statistics(groups, per_class, passes, steps, control.elapsed() - started))
 
     def _direct(self, job: RenderJob, pass_index: int) -> list[Callable[[Counters], np.ndarray]]:
-        """One BDPT sample per pixel of the paths of at most ``direct`` segments, as pieces of the pass: one per
-        range of pixels (each with its own random streams), each making an image (3, pixels) with given counters."""
+        """One BDPT sample per pixel of the paths the chains leave out (those of at most ``direct`` segments, and
+        with ``explore='specular'`` the longer ones without a specular vertex), as pieces of the pass: one per range
+        of pixels (each with its own random streams), each making an image (3, pixels) with given counters."""
         pixels = job.film.pixel_count
 
         def render_range(part: slice, counters: Counters) -> np.ndarray:

@@ -154,8 +154,8 @@ class Subpaths:
         """Whether any of vertices ``first`` .. ``last`` (inclusive; none where ``last`` < ``first``) of the
         subpaths of ``lane`` is specular (delta)."""
         start = self.offset.take(lane)
-        before = self._specular_before   # clipped: an empty range at the end of the last lane reads past it
-        return before.take(start + np.maximum(last + 1, first), mode="clip") > before.take(start + first, mode="clip")
+        before = self._specular_before
+        return before.take(start + np.maximum(last + 1, first)) > before.take(start + first)
 
 
 class Vertices:
