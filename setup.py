@@ -9,7 +9,8 @@ setup(
             sources=["ext/module.c", "ext/embree_loader.c", "ext/accel.c", "ext/mis.c"],
             depends=["ext/native.h", "ext/embree4_api.h"],
             include_dirs=["ext", numpy.get_include()],
-            extra_compile_args=["-O3", "-std=c11", "-D_GNU_SOURCE", "-Wall", "-Wextra", "-Wno-missing-field-initializers"],
+            extra_compile_args=["-O3", "-std=c11", "-D_GNU_SOURCE", "-Wall", "-Wextra", "-Wno-missing-field-initializers",
+                                "-ffp-contract=off"],
             libraries=["dl", "pthread", "m"],
         )
     ]

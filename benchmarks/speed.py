@@ -15,9 +15,10 @@ On the diffuse box:
 3. thread scaling: samples per second on every core over one thread, per estimator (goal >= 1.85 on
    2 cores);
 4. where the time goes, one thread: the share of the render's CPU time spent in ray queries
-   (``Accel.intersect`` / ``occluded``: Embree and the C packing of rays into its packets; goal >= 40% for
-   pt), and the largest NumPy costs (cProfile of the worker thread, a separate render: profiling slows
-   Python calls, so its shares are of the profiled time);
+   (``Accel.intersect`` / ``occluded`` / ``occluded_between``: Embree, the C packing of rays into its
+   packets and the shadow rays built in C; goal >= 40% for pt), and the largest NumPy costs (cProfile of
+   the worker thread, a separate render: profiling slows Python calls, so its shares are of the profiled
+   time);
 5. peak memory above the loaded scene at two resolutions (each render in a child process, see
    ``memory.py``), split into a constant part (the wavefront and the BVH's scratch) and bytes per pixel.
 
@@ -148,12 +149,15 @@ def thread_scaling(scene: ps.Scene, args) -> None:
 
 
 class QueryClock:
-    """Wall seconds spent in Accel.intersect / occluded while installed (renders on one thread)."""
+    """Wall seconds spent in Accel's queries (intersect, occluded, occluded_between) while installed (renders on
+    one thread)."""
+
+    METHODS = ("intersect", "occluded", "occluded_between")
 
     def __init__(self) -> None:
         self.seconds = 0.0
         self.lock = threading.Lock()
-        self.saved = (Accel.intersect, Accel.occluded)
+        self.saved = [getattr(Accel, name) for name in self.METHODS]
 
     def __enter__(self) -> "QueryClock":
         def timed(method):
@@ -165,11 +169,13 @@ class QueryClock:
                     with self.lock:
                         self.seconds += time.perf_counter() - start
             return call
-        Accel.intersect, Accel.occluded = (timed(m) for m in self.saved)
+        for name, method in zip(self.METHODS, self.saved):
+            setattr(Accel, name, timed(method))
         return self
 
     def __exit__(self, *exc) -> None:
-        Accel.intersect, Accel.occluded = self.saved
+        for name, method in zip(self.METHODS, self.saved):
+            setattr(Accel, name, method)
 
 
 def numpy_costs(scene: ps.Scene, estimator: str, spp: int, top: int = 5) -> list[tuple[str, float]]:

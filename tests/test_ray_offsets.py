@@ -13,7 +13,8 @@ import pathspace as ps
 from pathspace import Accel
 from pathspace.estimators.visibility import segment_blocked
 from pathspace.scene.mesh import TriangleMesh
-from pathspace.vecmath import dot, offset_origin
+from pathspace.vecmath import RAY_TMIN, dot, offset_origin, shadow_ray
+from conftest import scene_dict
 
 
 def random_rotations(rng, n):
@@ -145,3 +146,83 @@ def test_a_ray_starting_in_another_surfaces_plane_does_not_hit_it_at_distance_ze
     walk = Walk(scene, lanes, StreamSamplers(0).open([(0,)], [n]), RussianRoulette("off", 1, 0.5, 1.0),
                 Dimensions(bsdf=3))
     assert np.all(walk.trace().prim < 0)
+
+
+def reference_occluded_between(accel, a, n_a, eps_a, b, n_b, eps_b, lanes=None, *, threads=0):
+    """:meth:`Accel.occluded_between` in NumPy: the rays of :func:`pathspace.vecmath.shadow_ray`, traced."""
+    if lanes is not None:
+        a, n_a, eps_a, b, n_b, eps_b = (np.take(x, lanes, axis=-1) for x in (a, n_a, eps_a, b, n_b, eps_b))
+    origin, direction, tmax = shadow_ray(a, n_a, eps_a, b, n_b, eps_b)
+    return Accel.occluded(accel, origin, direction, RAY_TMIN, tmax, threads=threads)
+
+
+@pytest.mark.parametrize("distance", [0.0, 1e2, 1e4])
+def test_shadow_rays_built_in_c_are_the_numpy_references(distance):
+    """``Accel.occluded_between`` builds the rays of ``shadow_ray`` in C: on segments between points on random
+    triangles (many blocked, many clear, ends on the surfaces they join, at every angle; some points off
+    surfaces, some lanes gathered in C) its answers are, one by one, those of the NumPy reference's rays."""
+    rng = np.random.default_rng(5)
+    mesh, _ = triangles_in_cells(rng, 2048, distance, 1.0)
+    accel = Accel(mesh.vertices.astype(np.float32), mesh.indices)
+    n = 100_000
+    a, n_a, eps_a = hit_points(rng, mesh, rng.integers(0, mesh.triangle_count, n))
+    b, n_b, eps_b = hit_points(rng, mesh, rng.integers(0, mesh.triangle_count, n))
+    near = rng.uniform(size=n) < 0.3     # b close to a (1e-4 .. 1 apart, more far from the origin), grazing too
+    step = directions_at(rng, n_a[:, near].astype(np.float64), rng.uniform(-1.0, 1.0, near.sum()))
+    shortest = 1e-4 * max(1.0, distance / 100.0)
+    b[:, near] = a[:, near] + step * np.exp(rng.uniform(np.log(shortest), 0.0, near.sum())).astype(np.float32)
+    off = rng.uniform(size=n) < 0.1      # points off surfaces (lights, the lens): no normal, no error bound
+    n_a[:, off], eps_a[off] = 0.0, 0.0
+    segments = (a, n_a, eps_a, b, n_b, eps_b)
+    found = accel.occluded_between(*segments)
+    expected = reference_occluded_between(accel, *segments)
+    assert 0.03 < found.mean() < 0.97 and np.array_equal(found, expected), np.count_nonzero(found != expected)
+    lanes = np.sort(rng.choice(n, n // 3, replace=False))
+    assert np.array_equal(accel.occluded_between(*segments, lanes), expected[lanes])
+
+
+def test_renders_are_the_same_with_shadow_rays_built_in_numpy(monkeypatch):
+    """Images are bit for bit the same when every shadow ray is built by the NumPy reference instead of in C."""
+    scene = ps.scene_from_dict(scene_dict("cornell-box-specular", (24, 24)))
+    renders = [("pt", {}), ("lt", {}), ("bdpt", {}), ("mlt", {"max_depth": 5, "bootstrap": 256, "chains": 128})]
+    fast = [ps.render(scene, name, spp=4, seed=9, **params).image for name, params in renders]
+    monkeypatch.setattr(Accel, "occluded_between", reference_occluded_between)
+    for (name, params), image in zip(renders, fast):
+        np.testing.assert_array_equal(ps.render(scene, name, spp=4, seed=9, **params).image, image, err_msg=name)
+
+
+def test_bad_segments_are_refused_with_their_index():
+    accel = Accel(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], np.float32), np.array([[0, 1, 2]], np.uint32))
+    a, n = np.zeros((3, 2), np.float32), np.zeros((3, 2), np.float32)
+    eps = np.zeros(2, np.float32)
+    with pytest.raises(ValueError, match="invalid shadow ray 1: the segment from"):
+        accel.occluded_between(a, n, eps, np.array([[1, 0], [1, 0], [1, 0]], np.float32), n, eps)   # b = a
+    with pytest.raises(TypeError, match="b must have dtype float32"):
+        accel.occluded_between(a, n, eps, a.astype(np.float64), n, eps)
+    with pytest.raises(IndexError, match="lanes"):
+        accel.occluded_between(a, n, eps, a + 1, n, eps, np.array([0, 2]))
+
+
+def test_shadow_rays_built_in_c_end_where_the_numpy_references_do():
+    """Segments ending on quads with a parallel blocker a few float32 roundings in front (1e-8 .. 1e-4 away):
+    whether a segment is blocked hangs on its end offset and on the slack of its tmax, and the C rays answer as
+    the NumPy reference's, one by one (a slack off by a quarter flips some)."""
+    rng = np.random.default_rng(13)
+    cells = 1000
+    corner = np.stack(np.unravel_index(np.arange(cells), (10, 10, 10)), -1) * 2.0 - 10.0
+    gap = np.exp(rng.uniform(np.log(1e-8), np.log(1e-4), cells))
+    quad = np.array([[0, 0, 0], [1, 0, 0], [1, 0, 1], [0, 0, 1]], np.float64)
+    vertices = np.concatenate([corner[:, None] + quad, corner[:, None] + quad + gap[:, None, None] * [0, 1, 0]], 1)
+    faces = np.array([[0, 2, 1], [0, 3, 2], [4, 6, 5], [4, 7, 6]])
+    mesh = TriangleMesh(vertices.reshape(-1, 3), (faces + 8 * np.arange(cells)[:, None, None]).reshape(-1, 3),
+                        np.zeros(4 * cells), np.zeros(4 * cells))
+    accel = Accel(mesh.vertices.astype(np.float32), mesh.indices)
+    n = 100_000
+    base = 4 * rng.integers(0, cells, n) + rng.integers(0, 2, n)      # a triangle of a cell's lower quad
+    b, n_b, eps_b = hit_points(rng, mesh, base)
+    up = directions_at(rng, n_b.astype(np.float64), np.exp(rng.uniform(np.log(0.05), 0.0, n)))
+    a = (b + up * rng.uniform(0.05, 0.5, n).astype(np.float32)).astype(np.float32)
+    segments = (a, np.zeros((3, n), np.float32), np.zeros(n, np.float32), b, n_b, eps_b)
+    found = accel.occluded_between(*segments)
+    assert 0.1 < found.mean() < 0.9
+    assert np.array_equal(found, reference_occluded_between(accel, *segments))

@@ -83,3 +83,13 @@ class Accel(_native.Accel):
     def occluded(self, origins, directions, tmin=0.0, tmax=np.inf, *, threads: int = 0) -> np.ndarray:
         """Boolean (N,) array: True where a triangle lies on the ray within [tmin, tmax]."""
         return super().occluded(origins, directions, tmin, tmax, threads=threads)
+
+    def occluded_between(self, a: np.ndarray, n_a: np.ndarray, eps_a: np.ndarray, b: np.ndarray, n_b: np.ndarray,
+                         eps_b: np.ndarray, lanes: np.ndarray | None = None, *, threads: int = 0) -> np.ndarray:
+        """Boolean array: True where a triangle lies between surface points ``a`` and ``b`` (3, N) float32 with unit
+        normals ``n_*`` and error bounds ``eps_*`` (N,) float32, along the ray
+        :func:`pathspace.vecmath.shadow_ray` makes (built in C, bit for bit, with the points gathered there) from
+        ``RAY_TMIN``.  ``lanes``: int64 indices of the segments to test, (M,) (default: all N)."""
+        arrays = (np.ascontiguousarray(x) for x in (a, n_a, eps_a, b, n_b, eps_b))
+        return super().occluded_between(*arrays, None if lanes is None else np.ascontiguousarray(lanes),
+                                        threads=threads)
