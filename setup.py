@@ -6,11 +6,11 @@ setup(
     ext_modules=[
         Extension(
             "pathspace._native",
-            sources=["ext/module.c", "ext/embree_loader.c", "ext/accel.c", "ext/mis.c"],
+            sources=["ext/module.c", "ext/embree_loader.c", "ext/accel.c", "ext/mis.c", "ext/geometry.c"],
             depends=["ext/native.h", "ext/embree4_api.h"],
             include_dirs=["ext", numpy.get_include()],
-            extra_compile_args=["-O3", "-std=c11", "-D_GNU_SOURCE", "-Wall", "-Wextra", "-Wno-missing-field-initializers",
-                                "-ffp-contract=off"],
+            extra_compile_args=["-O3", "-std=c11", "-D_GNU_SOURCE", "-Wall", "-Wextra",
+                                "-Wno-missing-field-initializers", "-ffp-contract=off"],
             libraries=["dl", "pthread", "m"],
         )
     ]

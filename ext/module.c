@@ -47,6 +47,10 @@ static PyMethodDef module_methods[] = {
      "mis_weights(s, t, lane, light_offset, light_fwd, light_rev, light_delta, eye_offset, eye_fwd, eye_rev, "
      "eye_delta, light_is_delta, qs_fwd, qs_rev, qs_minus_rev, pt_fwd, pt_rev, pt_minus_rev, *, camera_is_delta, "
      "heuristic, beta, target_s, target_t)\n--\n\nBDPT MIS weight of every connection (see ext/mis.c)."},
+    {"hit_geometry", ps_hit_geometry, METH_VARARGS,
+     "hit_geometry(table, prim, b1, b2)\n--\n\nPoints p0 + b1 e1 + b2 e2 (3, N), unit geometric normals (3, N) and "
+     "ray offsets (N,), float32, of hits on triangles prim (int32) at barycentrics b1, b2 (float32), from a mesh's "
+     "(13, F) float32 table (see ext/geometry.c)."},
     {"default_thread_count", default_thread_count, METH_NOARGS,
      "default_thread_count()\n--\n\nNumber of cores this process may run on."},
     {NULL, NULL, 0, NULL},

@@ -19,6 +19,9 @@ PyObject *ps_embree_loaded(PyObject *module, PyObject *unused);
 /* BDPT MIS weights (mis.c). */
 PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs);
 
+/* Hit points, normals and ray offsets on the mesh's triangles (geometry.c). */
+PyObject *ps_hit_geometry(PyObject *module, PyObject *args);
+
 /* Accel type (accel.c). */
 extern PyTypeObject PsAccelType;
 int ps_default_thread_count(void);
