@@ -95,12 +95,11 @@ class AreaLight(Light):
     @staticmethod
     def sample_le(tables: "AreaTables", idx, u, colours, context: LightContext) -> EmissionSample:
         """A uniform point and a cosine-weighted direction (on either side of two-sided lights)."""
-        rows, p = tables.uniform_points(idx, u[0:2])
-        n = rows[9:12]
+        p, n, epsilon = tables.uniform_points(idx, u[0:2])
         two = tables.two_sided.take(idx)
         d = tables.emitted_directions(idx, n, u[2:4])
         cos = np.abs(dot(n, d)).astype(np.float64)
-        return EmissionSample(point=p, epsilon=rows[12], normal=n,
+        return EmissionSample(point=p, epsilon=epsilon, normal=n,
                               direction=d, value=tables.radiance_of(idx, colours),
                               pdf_pos=1.0 / tables.area.take(idx), pdf_dir=cos * warp.INV_PI * np.where(two, 0.5, 1.0),
                               cos_light=cos)
@@ -161,21 +160,20 @@ class AreaTables:
         u_side = np.where(two, (u[0] * 2) % 1.0, u[0])  # reused after choosing a side
         return warp.square_to_cosine_about(normal * side, np.stack((u_side, u[1])))
 
-    def uniform_points(self, emitter: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Points uniform in area on triangles ``emitter`` (density 1 / area): (their geometry rows, points)."""
-        rows = np.take(self.table, emitter, axis=1)
+    def uniform_points(self, emitter: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Points uniform in area on triangles ``emitter`` (density 1 / area): (points, unit normals, ray offsets),
+        float32."""
         b1, b2 = square_to_uniform_triangle(u)
-        return rows, rows[0:3] + rows[3:6] * b1.astype(np.float32) + rows[6:9] * b2.astype(np.float32)
+        return self.mesh.hit_geometry(self.triangles.take(emitter), b1, b2)
 
     def sample(self, emitter: np.ndarray, receivers: np.ndarray, u: np.ndarray, measure: str):
         """Points on triangles ``emitter`` for receivers (3, N): (point, normal, wi, distance, cos_light, pdf_sa).
 
         ``pdf_sa`` is the solid-angle density at the receiver given the triangle.
         """
-        rows, point = self.uniform_points(emitter, u)
-        normal = rows[9:12]
+        point, normal, _ = self.uniform_points(emitter, u)
         if measure == "solid_angle":
-            point, omega = self._solid_angle_points(rows, receivers, point, u)
+            point, omega = self._solid_angle_points(np.take(self.table, emitter, axis=1), receivers, point, u)
         wi = point - receivers
         dist2 = dot(wi, wi)
         distance = np.sqrt(dist2)
