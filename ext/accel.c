@@ -11,9 +11,8 @@
  * chunks through an atomic counter, so threads that draw cheap rays take more.
  *
  * occluded_between tests segments between surface points: it builds each shadow
- * ray as pathspace.vecmath.shadow_ray does, in the same float32 operations in
- * the same order (bit for bit the reference's rays; built without FMA
- * contraction), gathering the points of chosen lanes itself.
+ * ray as pathspace.vecmath.shadow_ray does (shadow.h), gathering the points of
+ * chosen lanes itself.
  *
  * Invalid rays (NaN or infinite origin or direction, zero direction, NaN,
  * infinite or negative tmin, NaN tmax) are never traced: the call raises
@@ -21,6 +20,7 @@
  * (tmax = -inf, say) is valid and empty: it misses and is not occluded.
  */
 #include "native.h"
+#include "shadow.h"
 
 #define NPY_NO_DEPRECATED_API NPY_2_0_API_VERSION
 #define NO_IMPORT_ARRAY
@@ -168,14 +168,6 @@ static int make_scalar_view(PyObject *obj, const char *name, npy_intp n, ScalarV
 /* ------------------------------------------------------------------------ */
 /* The threaded query                                                        */
 
-/* Segments between surface points a and b (occluded_between): (3, N) points and unit normals and (N,)
- * error bounds, all C-contiguous float32; segment i joins the points of lane lanes[i] (or i). */
-typedef struct {
-    const float *a, *n_a, *eps_a, *b, *n_b, *eps_b;
-    const int64_t *lanes;
-    npy_intp width;
-} Segments;
-
 typedef struct {
     RTCScene scene;
     int occlusion_only;
@@ -217,53 +209,6 @@ static inline int read_ray(const Query *q, npy_intp i, float r[8])
     return r[3] >= 0.0f;
 }
 
-/* pathspace.vecmath's gamma(4) in float32, as NumPy multiplies a float32 array by the Python float. */
-#define SHADOW_END_SLACK ((float)(4.0 * 0x1p-24 / (1.0 - 4.0 * 0x1p-24)))
-
-static inline float dot3(const float x[3], const float y[3])
-{
-    return (x[0] * y[0] + x[1] * y[1]) + x[2] * y[2];
-}
-
-/* The ray of segment i as float32 {org xyz, tnear, dir xyz, tfar}, as pathspace.vecmath.shadow_ray makes it (see
- * there: both ends offset toward each other by their error bounds, tmax short of the far surface by the slack
- * of its plane test), with tnear RAY_TMIN; returns 0 if the ray is invalid. */
-static inline int segment_ray(const Segments *s, npy_intp i, float r[8])
-{
-    npy_intp n = s->width, lane = s->lanes ? (npy_intp)s->lanes[i] : i;
-    float a[3], na[3], b[3], nb[3], w[3], back[3], end[3];
-    for (int c = 0; c < 3; ++c) {
-        a[c] = s->a[c * n + lane];
-        na[c] = s->n_a[c * n + lane];
-        b[c] = s->b[c * n + lane];
-        nb[c] = s->n_b[c * n + lane];
-        w[c] = b[c] - a[c];
-        back[c] = -w[c];
-    }
-    float eps_a = s->eps_a[lane], eps_b = s->eps_b[lane];
-    float side_a = dot3(na, w) < 0.0f ? -eps_a : eps_a;       /* offset_origin(a, n_a, eps_a, w) */
-    float side_b = dot3(nb, back) < 0.0f ? -eps_b : eps_b;    /* offset_origin(b, n_b, eps_b, -w) */
-    for (int c = 0; c < 3; ++c) {
-        r[c] = a[c] + na[c] * side_a;
-        end[c] = b[c] + nb[c] * side_b;
-    }
-    for (int c = 0; c < 3; ++c)
-        r[4 + c] = end[c] - r[c];
-    const float *d = r + 4;
-    float spread = (fabsf(nb[0] * d[0]) + fabsf(nb[1] * d[1])) + fabsf(nb[2] * d[2]);
-    float slack = eps_b > 0.0f ? SHADOW_END_SLACK * spread : 0.0f;
-    float across = fabsf(dot3(d, nb));
-    float tmax = slack > 0.0f ? 1.0f - slack / across : 1.0f;
-    r[3] = FLT_MIN; /* RAY_TMIN */
-    r[7] = isnan(tmax) || tmax > 0.0f ? tmax : 0.0f; /* np.maximum(tmax, 0), which keeps NaN */
-    for (int k = 0; k < 7; ++k)
-        if (!isfinite(r[k]))
-            return 0;
-    if (r[4] == 0.0f && r[5] == 0.0f && r[6] == 0.0f)
-        return 0;
-    return !isnan(r[7]);
-}
-
 static void note_bad_ray(Query *q, npy_intp i)
 {
     long long current = atomic_load(&q->first_bad);
@@ -279,7 +224,7 @@ static void occlude_range(Query *q, npy_intp begin, npy_intp end)
     struct RTCRay ray;
     float r[8];
     for (npy_intp i = begin; i < end; ++i) {
-        if (!(q->segments ? segment_ray(q->segments, i, r) : read_ray(q, i, r))) {
+        if (!(q->segments ? ps_segment_ray(q->segments, i, r) : read_ray(q, i, r))) {
             note_bad_ray(q, i);
             q->occluded[i] = 0;
             continue;
@@ -547,40 +492,13 @@ static PyObject *Accel_occluded(PsAccel *self, PyObject *args, PyObject *kwargs)
     return (PyObject *)out;
 }
 
-static const float *segment_array(PyObject *obj, const char *name, int rows, npy_intp *width)
-{
-    if (!PyArray_Check(obj)) {
-        PyErr_Format(PyExc_TypeError, "%s must be a NumPy float32 array, got %s", name, Py_TYPE(obj)->tp_name);
-        return NULL;
-    }
-    PyArrayObject *a = (PyArrayObject *)obj;
-    if (PyArray_TYPE(a) != NPY_FLOAT || !PyArray_ISNOTSWAPPED(a)) {
-        PyErr_Format(PyExc_TypeError, "%s must have dtype float32 (the points' own precision), got %R", name,
-                     (PyObject *)PyArray_DESCR(a));
-        return NULL;
-    }
-    int ok = rows == 3 ? PyArray_NDIM(a) == 2 && PyArray_DIM(a, 0) == 3 : PyArray_NDIM(a) == 1;
-    npy_intp n = PyArray_DIM(a, PyArray_NDIM(a) - 1);
-    if (!ok || (*width >= 0 && n != *width)) {
-        PyErr_Format(PyExc_ValueError, "%s must have shape %s with the N of origins (%zd)", name,
-                     rows == 3 ? "(3, N)" : "(N,)", (Py_ssize_t)*width);
-        return NULL;
-    }
-    if (!PyArray_IS_C_CONTIGUOUS(a) || !PyArray_ISALIGNED(a)) {
-        PyErr_Format(PyExc_ValueError, "%s must be C-contiguous and aligned", name);
-        return NULL;
-    }
-    *width = n;
-    return (const float *)PyArray_DATA(a);
-}
-
 static PyObject *Accel_occluded_between(PsAccel *self, PyObject *args, PyObject *kwargs)
 {
     static char *kwlist[] = {"a", "n_a", "eps_a", "b", "n_b", "eps_b", "lanes", "threads", NULL};
-    PyObject *obj[6], *lanes_obj = Py_None;
+    PyObject *arrays[6], *lanes = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOO|O$i:occluded_between", kwlist, &obj[0], &obj[1], &obj[2],
-                                     &obj[3], &obj[4], &obj[5], &lanes_obj, &threads))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOO|O$i:occluded_between", kwlist, &arrays[0], &arrays[1],
+                                     &arrays[2], &arrays[3], &arrays[4], &arrays[5], &lanes, &threads))
         return NULL;
     if (self->scene == NULL) {
         PyErr_SetString(PyExc_RuntimeError, "Accel was not initialised");
@@ -591,40 +509,18 @@ static PyObject *Accel_occluded_between(PsAccel *self, PyObject *args, PyObject 
                      threads);
         return NULL;
     }
-    static const char *names[6] = {"a", "n_a", "eps_a", "b", "n_b", "eps_b"};
-    const float *data[6];
     Segments seg;
-    seg.width = -1;
-    for (int k = 0; k < 6; ++k)
-        if (!(data[k] = segment_array(obj[k], names[k], k % 3 == 2 ? 1 : 3, &seg.width)))
-            return NULL;
-    seg.a = data[0], seg.n_a = data[1], seg.eps_a = data[2], seg.b = data[3], seg.n_b = data[4], seg.eps_b = data[5];
-    seg.lanes = NULL;
-    npy_intp count = seg.width;
-    if (lanes_obj != Py_None) {
-        PyArrayObject *lanes = (PyArrayObject *)lanes_obj;
-        if (!PyArray_Check(lanes_obj) || PyArray_TYPE(lanes) != NPY_INT64 || PyArray_NDIM(lanes) != 1 ||
-            !PyArray_IS_C_CONTIGUOUS(lanes) || !PyArray_ISALIGNED(lanes)) {
-            PyErr_SetString(PyExc_TypeError, "lanes must be a contiguous int64 array of shape (M,)");
-            return NULL;
-        }
-        seg.lanes = (const int64_t *)PyArray_DATA(lanes);
-        count = PyArray_DIM(lanes, 0);
-        for (npy_intp i = 0; i < count; ++i)
-            if (seg.lanes[i] < 0 || seg.lanes[i] >= seg.width) {
-                PyErr_Format(PyExc_IndexError, "lanes[%zd] = %lld is outside 0 .. %zd", (Py_ssize_t)i,
-                             (long long)seg.lanes[i], (Py_ssize_t)seg.width - 1);
-                return NULL;
-            }
-    }
+    if (ps_parse_segments(arrays, lanes, &seg) < 0)
+        return NULL;
     Query q;
     memset(&q, 0, sizeof(q));
     q.scene = self->scene;
     q.occlusion_only = 1;
     q.segments = &seg;
-    q.n = count;
+    q.n = seg.count;
     atomic_init(&q.next_ray, 0);
     atomic_init(&q.first_bad, LLONG_MAX);
+    npy_intp count = seg.count;
     PyArrayObject *out = (PyArrayObject *)PyArray_SimpleNew(1, &count, NPY_BOOL);
     if (!out)
         return NULL;
@@ -634,18 +530,8 @@ static PyObject *Accel_occluded_between(PsAccel *self, PyObject *args, PyObject 
     Py_END_ALLOW_THREADS
     long long bad = atomic_load(&q.first_bad);
     if (bad != LLONG_MAX) {
-        float r[8];
-        npy_intp i = (npy_intp)bad, lane = seg.lanes ? (npy_intp)seg.lanes[i] : i, n = seg.width;
-        char text[512];
-        segment_ray(&seg, i, r);
-        snprintf(text, sizeof(text),
-                 "invalid shadow ray %zd: the segment from (%g, %g, %g) to (%g, %g, %g) gives origin (%g, %g, %g), "
-                 "direction (%g, %g, %g) and tmax %g (origin and direction must be finite, the direction not zero, "
-                 "tmax not NaN)", (Py_ssize_t)i, seg.a[lane], seg.a[n + lane], seg.a[2 * n + lane], seg.b[lane],
-                 seg.b[n + lane], seg.b[2 * n + lane], r[0], r[1], r[2], r[4], r[5], r[6], r[7]);
-        PyErr_SetString(PyExc_ValueError, text);
         Py_DECREF(out);
-        return NULL;
+        return ps_bad_segment(&seg, (Py_ssize_t)bad);
     }
     return (PyObject *)out;
 }

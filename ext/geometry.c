@@ -3,7 +3,7 @@
  * the mesh's per-triangle table (pathspace.scene.mesh.TriangleMesh.table) and Embree's barycentrics, in one
  * pass with the GIL released.  The point is p0 + b1 e1 + b2 e2 in float32, in the operations and order of
  * the NumPy expression it replaces ((p0 + e1 b1) + e2 b2; built without FMA contraction), so hits are bit
- * for bit the same.
+ * for bit the same.  Triangle indices are int32 (Embree's) or int64, each read once and checked.
  */
 #include "native.h"
 
@@ -12,13 +12,21 @@
 #define PY_ARRAY_UNIQUE_SYMBOL pathspace_native_ARRAY_API
 #include <numpy/arrayobject.h>
 
+#include <float.h>
 #include <stdint.h>
+
+#if defined(__FAST_MATH__) || FLT_EVAL_METHOD != 0
+#error "hit points must be computed in plain IEEE float32, as NumPy computes them: no -ffast-math"
+#endif
 
 #define TABLE_ROWS 13 /* p0 (3), e1 (3), e2 (3), unit normal (3), ray offset (1) */
 
-static PyArrayObject *contiguous(PyObject *obj, const char *name, int type, const char *type_name, int ndim)
+/* obj as an array of one of the types type and other (-1: none), ndim dimensions, C-contiguous and aligned. */
+static PyArrayObject *checked_array(PyObject *obj, const char *name, int type, int other, const char *type_name,
+                                    int ndim)
 {
-    if (!PyArray_Check(obj) || PyArray_TYPE((PyArrayObject *)obj) != type ||
+    if (!PyArray_Check(obj) || (PyArray_TYPE((PyArrayObject *)obj) != type &&
+                                PyArray_TYPE((PyArrayObject *)obj) != other) ||
         PyArray_NDIM((PyArrayObject *)obj) != ndim || !PyArray_ISNOTSWAPPED((PyArrayObject *)obj)) {
         PyErr_Format(PyExc_TypeError, "%s must be a %dD %s array", name, ndim, type_name);
         return NULL;
@@ -37,10 +45,10 @@ PyObject *ps_hit_geometry(PyObject *module, PyObject *args)
     PyObject *objs[4];
     if (!PyArg_ParseTuple(args, "OOOO:hit_geometry", &objs[0], &objs[1], &objs[2], &objs[3]))
         return NULL;
-    PyArrayObject *table = contiguous(objs[0], "table", NPY_FLOAT, "float32", 2);
-    PyArrayObject *prim = table ? contiguous(objs[1], "prim", NPY_INT32, "int32", 1) : NULL;
-    PyArrayObject *b1 = prim ? contiguous(objs[2], "b1", NPY_FLOAT, "float32", 1) : NULL;
-    PyArrayObject *b2 = b1 ? contiguous(objs[3], "b2", NPY_FLOAT, "float32", 1) : NULL;
+    PyArrayObject *table = checked_array(objs[0], "table", NPY_FLOAT, -1, "float32", 2);
+    PyArrayObject *prim = table ? checked_array(objs[1], "prim", NPY_INT32, NPY_INT64, "int32 or int64", 1) : NULL;
+    PyArrayObject *b1 = prim ? checked_array(objs[2], "b1", NPY_FLOAT, -1, "float32", 1) : NULL;
+    PyArrayObject *b2 = b1 ? checked_array(objs[3], "b2", NPY_FLOAT, -1, "float32", 1) : NULL;
     if (!b2)
         return NULL;
     if (PyArray_DIM(table, 0) != TABLE_ROWS) {
@@ -54,13 +62,9 @@ PyObject *ps_hit_geometry(PyObject *module, PyObject *args)
                      (Py_ssize_t)n, (Py_ssize_t)PyArray_DIM(b1, 0), (Py_ssize_t)PyArray_DIM(b2, 0));
         return NULL;
     }
-    const int32_t *tri = (const int32_t *)PyArray_DATA(prim);
-    for (npy_intp i = 0; i < n; ++i)
-        if (tri[i] < 0 || tri[i] >= count) {
-            PyErr_Format(PyExc_IndexError, "prim[%zd] = %d is not a triangle (0 .. %zd)", (Py_ssize_t)i, tri[i],
-                         (Py_ssize_t)count - 1);
-            return NULL;
-        }
+    const int32_t *tri32 = (const int32_t *)PyArray_DATA(prim);
+    const int64_t *tri64 = (const int64_t *)PyArray_DATA(prim);
+    int wide = PyArray_TYPE(prim) == NPY_INT64;
     npy_intp dims[2] = {3, n};
     PyArrayObject *p = (PyArrayObject *)PyArray_SimpleNew(2, dims, NPY_FLOAT);
     PyArrayObject *normal = (PyArrayObject *)PyArray_SimpleNew(2, dims, NPY_FLOAT);
@@ -75,9 +79,16 @@ PyObject *ps_hit_geometry(PyObject *module, PyObject *args)
                 *v = (const float *)PyArray_DATA(b2);
     float *out_p = (float *)PyArray_DATA(p), *out_n = (float *)PyArray_DATA(normal);
     float *out_eps = (float *)PyArray_DATA(eps);
+    npy_intp bad = -1;
+    long long bad_value = 0;
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp i = 0; i < n; ++i) {
-        npy_intp k = tri[i];
+        long long k = wide ? (long long)tri64[i] : (long long)tri32[i];   /* read once: checked, then used */
+        if (k < 0 || k >= (long long)count) {
+            bad = i;
+            bad_value = k;
+            break;
+        }
         for (int c = 0; c < 3; ++c) {
             out_p[c * n + i] = (t[c * count + k] + t[(3 + c) * count + k] * u[i]) + t[(6 + c) * count + k] * v[i];
             out_n[c * n + i] = t[(9 + c) * count + k];
@@ -85,5 +96,13 @@ PyObject *ps_hit_geometry(PyObject *module, PyObject *args)
         out_eps[i] = t[12 * count + k];
     }
     Py_END_ALLOW_THREADS
+    if (bad >= 0) {
+        PyErr_Format(PyExc_IndexError, "prim[%zd] = %lld is not a triangle (0 .. %zd)", (Py_ssize_t)bad, bad_value,
+                     (Py_ssize_t)count - 1);
+        Py_DECREF(p);
+        Py_DECREF(normal);
+        Py_DECREF(eps);
+        return NULL;
+    }
     return Py_BuildValue("(NNN)", p, normal, eps);
 }

@@ -1,5 +1,6 @@
 /* pathspace._native: module definition. */
 #include "native.h"
+#include "shadow.h"
 
 #ifdef __GLIBC__
 #include <malloc.h>
@@ -51,6 +52,10 @@ static PyMethodDef module_methods[] = {
      "hit_geometry(table, prim, b1, b2)\n--\n\nPoints p0 + b1 e1 + b2 e2 (3, N), unit geometric normals (3, N) and "
      "ray offsets (N,), float32, of hits on triangles prim (int32) at barycentrics b1, b2 (float32), from a mesh's "
      "(13, F) float32 table (see ext/geometry.c)."},
+    {"shadow_rays", (PyCFunction)(void (*)(void))ps_shadow_rays, METH_VARARGS | METH_KEYWORDS,
+     "shadow_rays(a, n_a, eps_a, b, n_b, eps_b, lanes=None)\n--\n\n(origins (3, M), directions (3, M), tmax (M,)), "
+     "float32: the rays Accel.occluded_between traces from tmin = RAY_TMIN, bit for bit those of "
+     "pathspace.vecmath.shadow_ray (see ext/shadow.h)."},
     {"default_thread_count", default_thread_count, METH_NOARGS,
      "default_thread_count()\n--\n\nNumber of cores this process may run on."},
     {NULL, NULL, 0, NULL},
@@ -78,5 +83,12 @@ PyMODINIT_FUNC PyInit__native(void)
         Py_DECREF(m);
         return NULL;
     }
+    PyObject *tmin = PyFloat_FromDouble(SHADOW_RAY_TMIN);   /* tested equal to pathspace.vecmath.RAY_TMIN */
+    if (tmin == NULL || PyModule_AddObjectRef(m, "SHADOW_RAY_TMIN", tmin) < 0) {
+        Py_XDECREF(tmin);
+        Py_DECREF(m);
+        return NULL;
+    }
+    Py_DECREF(tmin);
     return m;
 }

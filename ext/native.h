@@ -22,6 +22,9 @@ PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs);
 /* Hit points, normals and ray offsets on the mesh's triangles (geometry.c). */
 PyObject *ps_hit_geometry(PyObject *module, PyObject *args);
 
+/* Shadow rays between surface points, returned (shadow.c; Accel.occluded_between traces them). */
+PyObject *ps_shadow_rays(PyObject *module, PyObject *args, PyObject *kwargs);
+
 /* Accel type (accel.c). */
 extern PyTypeObject PsAccelType;
 int ps_default_thread_count(void);

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import pathspace as ps
-from pathspace import Accel
+from pathspace import Accel, _native
 from pathspace.estimators.visibility import segment_blocked
 from pathspace.scene.mesh import TriangleMesh
 from pathspace.vecmath import RAY_TMIN, dot, offset_origin, shadow_ray
@@ -173,12 +173,20 @@ def test_shadow_rays_built_in_c_are_the_numpy_references(distance):
     b[:, near] = a[:, near] + step * np.exp(rng.uniform(np.log(shortest), 0.0, near.sum())).astype(np.float32)
     off = rng.uniform(size=n) < 0.1      # points off surfaces (lights, the lens): no normal, no error bound
     n_a[:, off], eps_a[off] = 0.0, 0.0
+    camera = rng.uniform(size=n) < 0.1   # far ends off surfaces but with a normal (a thin lens' axis)
+    eps_b[camera] = 0.0
     segments = (a, n_a, eps_a, b, n_b, eps_b)
     found = accel.occluded_between(*segments)
     expected = reference_occluded_between(accel, *segments)
     assert 0.03 < found.mean() < 0.97 and np.array_equal(found, expected), np.count_nonzero(found != expected)
     lanes = np.sort(rng.choice(n, n // 3, replace=False))
     assert np.array_equal(accel.occluded_between(*segments, lanes), expected[lanes])
+    # The rays themselves, bit for bit (signed zeros too).
+    for built, reference in zip(_native.shadow_rays(*segments, lanes), shadow_ray(*(np.take(x, lanes, axis=-1)
+                                                                                     for x in segments))):
+        assert built.dtype == reference.dtype == np.float32
+        np.testing.assert_array_equal(built.view(np.int32), reference.view(np.int32))
+    assert _native.SHADOW_RAY_TMIN == float(RAY_TMIN)
 
 
 def test_renders_are_the_same_with_shadow_rays_built_in_numpy(monkeypatch):
@@ -201,6 +209,10 @@ def test_bad_segments_are_refused_with_their_index():
         accel.occluded_between(a, n, eps, a.astype(np.float64), n, eps)
     with pytest.raises(IndexError, match="lanes"):
         accel.occluded_between(a, n, eps, a + 1, n, eps, np.array([0, 2]))
+    with pytest.raises(ValueError, match="eps_a must have shape"):       # a 0-d array
+        _native.Accel.occluded_between(accel, a, n, np.array(0, np.float32), a + 1, n, eps)
+    with pytest.raises(ValueError, match="n_b has N = 3, but a has N = 2"):
+        accel.occluded_between(a, n, eps, a + 1, np.zeros((3, 3), np.float32), eps)
 
 
 def test_shadow_rays_built_in_c_end_where_the_numpy_references_do():

@@ -91,5 +91,6 @@ class Accel(_native.Accel):
         :func:`pathspace.vecmath.shadow_ray` makes (built in C, bit for bit, with the points gathered there) from
         ``RAY_TMIN``.  ``lanes``: int64 indices of the segments to test, (M,) (default: all N)."""
         arrays = (np.ascontiguousarray(x) for x in (a, n_a, eps_a, b, n_b, eps_b))
-        return super().occluded_between(*arrays, None if lanes is None else np.ascontiguousarray(lanes),
-                                        threads=threads)
+        if lanes is not None:
+            lanes = np.ascontiguousarray(np.asarray(lanes).astype(np.int64, casting="safe", copy=False))
+        return super().occluded_between(*arrays, lanes, threads=threads)

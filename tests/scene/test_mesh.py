@@ -22,7 +22,7 @@ def test_hit_geometry_is_the_numpy_reference(scale, distance):
     vertices = rng.normal(size=(3 * count, 3)) * scale + rng.normal(size=3) * distance
     mesh = TriangleMesh(vertices, np.arange(3 * count).reshape(-1, 3), np.zeros(count), np.zeros(count))
     n = 100_000
-    prim = rng.integers(0, count, n).astype(np.int32)
+    prim = rng.integers(0, count, n).astype(np.int32 if scale < 1e3 else np.int64)   # Embree's int32, or int64
     prim[:2] = 0, count - 1
     u = rng.uniform(size=(2, n)).astype(np.float32)
     b1, b2 = np.where(u.sum(0) > 1, 1 - u, u)
@@ -38,5 +38,9 @@ def test_bad_triangle_indices_are_refused():
     mesh = TriangleMesh(np.eye(3), np.array([[0, 1, 2]]), np.zeros(1), np.zeros(1))
     with pytest.raises(IndexError, match=r"prim\[1\] = 1 is not a triangle"):
         mesh.hit_geometry(np.array([0, 1]), np.zeros(2), np.zeros(2))
+    with pytest.raises(IndexError, match="not a triangle"):
+        mesh.hit_geometry(np.array([2 ** 32]), np.zeros(1), np.zeros(1))   # no silent wrap-around
+    with pytest.raises(TypeError):
+        mesh.hit_geometry(np.array([0.0]), np.zeros(1), np.zeros(1))
     with pytest.raises(ValueError, match="same length"):
         mesh.hit_geometry(np.array([0, 0]), np.zeros(3), np.zeros(2))

@@ -89,7 +89,11 @@ class TriangleMesh:
     def hit_geometry(self, prim: np.ndarray, b1: np.ndarray, b2: np.ndarray
                      ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Points (1-b1-b2) p0 + b1 p1 + b2 p2 and unit geometric normals, (3, N) float32, on triangles
-        ``prim`` (int32), and their ray offsets epsilon (N,) float32; ``b1``, ``b2`` float32 barycentrics.
+        ``prim`` (integers; IndexError for any that is not a triangle), and their ray offsets epsilon (N,)
+        float32; barycentrics ``b1``, ``b2`` in float32 (as Embree reports them; others are rounded to it).
         Computed in C in one pass (``ext/geometry.c``): p0 + b1 e1 + b2 e2 from the table's rows, in float32."""
+        prim = np.asarray(prim)
+        if prim.dtype not in (np.int32, np.int64):
+            prim = prim.astype(np.int64, casting="safe")
         b1, b2 = (np.ascontiguousarray(b, dtype=np.float32) for b in (b1, b2))
-        return _native.hit_geometry(self.table, np.ascontiguousarray(prim, dtype=np.int32), b1, b2)
+        return _native.hit_geometry(self.table, np.ascontiguousarray(prim), b1, b2)
