@@ -27,7 +27,6 @@
 #define PY_ARRAY_UNIQUE_SYMBOL pathspace_native_ARRAY_API
 #include <numpy/arrayobject.h>
 
-#include <float.h>
 #include <math.h>
 #include <pthread.h>
 #include <sched.h>
