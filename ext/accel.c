@@ -374,6 +374,48 @@ static PyObject *describe_bad_ray(const Query *q, npy_intp i)
     return NULL;
 }
 
+/* Make q a query of self's scene on *threads threads (0: the Accel's default); 0, or -1 with a Python error. */
+static int start_query(PsAccel *self, Query *q, int *threads, int occlusion_only)
+{
+    if (self->scene == NULL) {
+        PyErr_SetString(PyExc_RuntimeError, "Accel was not initialised");
+        return -1;
+    }
+    if (*threads < 0 || *threads > MAX_THREADS) {
+        PyErr_Format(PyExc_ValueError, "threads must be between 0 (the Accel's default) and %d, got %d", MAX_THREADS,
+                     *threads);
+        return -1;
+    }
+    if (*threads == 0)
+        *threads = self->threads;
+    q->scene = self->scene;
+    q->occlusion_only = occlusion_only;
+    atomic_init(&q->next_ray, 0);
+    atomic_init(&q->first_bad, LLONG_MAX);
+    return 0;
+}
+
+/* Trace q's rays for occlusion, with the GIL released, into a new bool array (N,); NULL with *bad the index of
+ * the first invalid ray (-1: the array could not be made). */
+static PyObject *trace_occlusion(Query *q, int threads, long long *bad)
+{
+    npy_intp n = q->n;
+    PyArrayObject *out = (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_BOOL);
+    *bad = -1;
+    if (!out)
+        return NULL;
+    q->occluded = (npy_bool *)PyArray_DATA(out);
+    Py_BEGIN_ALLOW_THREADS
+    run_query(q, threads);
+    Py_END_ALLOW_THREADS
+    if (atomic_load(&q->first_bad) != LLONG_MAX) {
+        *bad = atomic_load(&q->first_bad);
+        Py_DECREF(out);
+        return NULL;
+    }
+    return (PyObject *)out;
+}
+
 static int parse_query(PsAccel *self, PyObject *args, PyObject *kwargs, Query *q, int *threads,
                        int *normals, int occlusion_only)
 {
@@ -389,10 +431,6 @@ static int parse_query(PsAccel *self, PyObject *args, PyObject *kwargs, Query *q
                                                &tmax, threads, normals);
     if (!ok)
         return -1;
-    if (self->scene == NULL) {
-        PyErr_SetString(PyExc_RuntimeError, "Accel was not initialised");
-        return -1;
-    }
     npy_intp n_org, n_dir;
     if (make_vec3_view(org, "origins", &q->org, &n_org) < 0 || make_vec3_view(dir, "directions", &q->dir, &n_dir) < 0)
         return -1;
@@ -414,18 +452,7 @@ static int parse_query(PsAccel *self, PyObject *args, PyObject *kwargs, Query *q
     } else if (make_scalar_view(tmax, "tmax", q->n, &q->tmax) < 0) {
         return -1;
     }
-    if (*threads < 0 || *threads > MAX_THREADS) {
-        PyErr_Format(PyExc_ValueError, "threads must be between 0 (the Accel's default) and %d, got %d", MAX_THREADS,
-                     *threads);
-        return -1;
-    }
-    if (*threads == 0)
-        *threads = self->threads;
-    q->scene = self->scene;
-    q->occlusion_only = occlusion_only;
-    atomic_init(&q->next_ray, 0);
-    atomic_init(&q->first_bad, LLONG_MAX);
-    return 0;
+    return start_query(self, q, threads, occlusion_only);
 }
 
 static PyObject *Accel_intersect(PsAccel *self, PyObject *args, PyObject *kwargs)
@@ -476,19 +503,9 @@ static PyObject *Accel_occluded(PsAccel *self, PyObject *args, PyObject *kwargs)
     int threads, normals;
     if (parse_query(self, args, kwargs, &q, &threads, &normals, 1) < 0)
         return NULL;
-    npy_intp n = q.n;
-    PyArrayObject *out = (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_BOOL);
-    if (!out)
-        return NULL;
-    q.occluded = (npy_bool *)PyArray_DATA(out);
-    Py_BEGIN_ALLOW_THREADS
-    run_query(&q, threads);
-    Py_END_ALLOW_THREADS
-    if (atomic_load(&q.first_bad) != LLONG_MAX) {
-        Py_DECREF(out);
-        return describe_bad_ray(&q, (npy_intp)atomic_load(&q.first_bad));
-    }
-    return (PyObject *)out;
+    long long bad;
+    PyObject *out = trace_occlusion(&q, threads, &bad);
+    return out != NULL || bad < 0 ? out : describe_bad_ray(&q, (npy_intp)bad);
 }
 
 static PyObject *Accel_occluded_between(PsAccel *self, PyObject *args, PyObject *kwargs)
@@ -499,40 +516,16 @@ static PyObject *Accel_occluded_between(PsAccel *self, PyObject *args, PyObject 
     if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOO|O$i:occluded_between", kwlist, &arrays[0], &arrays[1],
                                      &arrays[2], &arrays[3], &arrays[4], &arrays[5], &lanes, &threads))
         return NULL;
-    if (self->scene == NULL) {
-        PyErr_SetString(PyExc_RuntimeError, "Accel was not initialised");
-        return NULL;
-    }
-    if (threads < 0 || threads > MAX_THREADS) {
-        PyErr_Format(PyExc_ValueError, "threads must be between 0 (the Accel's default) and %d, got %d", MAX_THREADS,
-                     threads);
-        return NULL;
-    }
     Segments seg;
-    if (ps_parse_segments(arrays, lanes, &seg) < 0)
-        return NULL;
     Query q;
     memset(&q, 0, sizeof(q));
-    q.scene = self->scene;
-    q.occlusion_only = 1;
+    if (ps_parse_segments(arrays, lanes, &seg) < 0 || start_query(self, &q, &threads, 1) < 0)
+        return NULL;
     q.segments = &seg;
     q.n = seg.count;
-    atomic_init(&q.next_ray, 0);
-    atomic_init(&q.first_bad, LLONG_MAX);
-    npy_intp count = seg.count;
-    PyArrayObject *out = (PyArrayObject *)PyArray_SimpleNew(1, &count, NPY_BOOL);
-    if (!out)
-        return NULL;
-    q.occluded = (npy_bool *)PyArray_DATA(out);
-    Py_BEGIN_ALLOW_THREADS
-    run_query(&q, threads == 0 ? self->threads : threads);
-    Py_END_ALLOW_THREADS
-    long long bad = atomic_load(&q.first_bad);
-    if (bad != LLONG_MAX) {
-        Py_DECREF(out);
-        return ps_bad_segment(&seg, (Py_ssize_t)bad);
-    }
-    return (PyObject *)out;
+    long long bad;
+    PyObject *out = trace_occlusion(&q, threads, &bad);
+    return out != NULL || bad < 0 ? out : ps_bad_segment(&seg, (Py_ssize_t)bad);
 }
 
 /* ------------------------------------------------------------------------ */
