@@ -21,9 +21,7 @@
 
 #define TABLE_ROWS 13 /* p0 (3), e1 (3), e2 (3), unit normal (3), ray offset (1) */
 
-/* obj as an array of one of the types type and other (-1: none), ndim dimensions, C-contiguous and aligned. */
-static PyArrayObject *checked_array(PyObject *obj, const char *name, int type, int other, const char *type_name,
-                                    int ndim)
+PyObject *ps_checked_array(PyObject *obj, const char *name, int type, int other, const char *type_name, int ndim)
 {
     if (!PyArray_Check(obj) || (PyArray_TYPE((PyArrayObject *)obj) != type &&
                                 PyArray_TYPE((PyArrayObject *)obj) != other) ||
@@ -36,7 +34,7 @@ static PyArrayObject *checked_array(PyObject *obj, const char *name, int type, i
         PyErr_Format(PyExc_ValueError, "%s must be C-contiguous and aligned", name);
         return NULL;
     }
-    return a;
+    return obj;
 }
 
 PyObject *ps_hit_geometry(PyObject *module, PyObject *args)
@@ -45,10 +43,11 @@ PyObject *ps_hit_geometry(PyObject *module, PyObject *args)
     PyObject *objs[4];
     if (!PyArg_ParseTuple(args, "OOOO:hit_geometry", &objs[0], &objs[1], &objs[2], &objs[3]))
         return NULL;
-    PyArrayObject *table = checked_array(objs[0], "table", NPY_FLOAT, -1, "float32", 2);
-    PyArrayObject *prim = table ? checked_array(objs[1], "prim", NPY_INT32, NPY_INT64, "int32 or int64", 1) : NULL;
-    PyArrayObject *b1 = prim ? checked_array(objs[2], "b1", NPY_FLOAT, -1, "float32", 1) : NULL;
-    PyArrayObject *b2 = b1 ? checked_array(objs[3], "b2", NPY_FLOAT, -1, "float32", 1) : NULL;
+    PyArrayObject *table = (PyArrayObject *)ps_checked_array(objs[0], "table", NPY_FLOAT, -1, "float32", 2);
+    PyArrayObject *prim = table ? (PyArrayObject *)ps_checked_array(objs[1], "prim", NPY_INT32, NPY_INT64,
+                                                                    "int32 or int64", 1) : NULL;
+    PyArrayObject *b1 = prim ? (PyArrayObject *)ps_checked_array(objs[2], "b1", NPY_FLOAT, -1, "float32", 1) : NULL;
+    PyArrayObject *b2 = b1 ? (PyArrayObject *)ps_checked_array(objs[3], "b2", NPY_FLOAT, -1, "float32", 1) : NULL;
     if (!b2)
         return NULL;
     if (PyArray_DIM(table, 0) != TABLE_ROWS) {

@@ -56,6 +56,13 @@ static PyMethodDef module_methods[] = {
      "shadow_rays(a, n_a, eps_a, b, n_b, eps_b, lanes=None)\n--\n\n(origins (3, M), directions (3, M), tmax (M,)), "
      "float32: the rays Accel.occluded_between traces from tmin = RAY_TMIN, bit for bit those of "
      "pathspace.vecmath.shadow_ray (see ext/shadow.h)."},
+    {"primary_fetch", ps_primary_fetch, METH_VARARGS,
+     "primary_fetch(proposal, current, stamp, rows, columns, accepted, last_large, large, mode, kernel, size, "
+     "limit, draw)\n--\n\n(numbers (N,), flat indices drawn (M,)): the proposal's numbers at (rows, columns) of "
+     "Metropolis chain states, drawing those not drawn yet with uniforms from draw(k) (see ext/primary.c)."},
+    {"primary_settle", ps_primary_settle, METH_VARARGS,
+     "primary_settle(proposal, current, stamp, flat, accept, accepted)\n--\n\nEnd a proposal: the chains that "
+     "accept take its numbers at flat, and they are forgotten (see ext/primary.c)."},
     {"default_thread_count", default_thread_count, METH_NOARGS,
      "default_thread_count()\n--\n\nNumber of cores this process may run on."},
     {NULL, NULL, 0, NULL},

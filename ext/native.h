@@ -21,6 +21,14 @@ PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs);
 
 /* Hit points, normals and ray offsets on the mesh's triangles (geometry.c). */
 PyObject *ps_hit_geometry(PyObject *module, PyObject *args);
+/* obj (borrowed) if it is a NumPy array of type `type` or `other` (NPY_ type numbers; -1: none) with ndim
+ * dimensions, native byte order, C-contiguous and aligned; else NULL with a TypeError or ValueError naming
+ * `name` (geometry.c). */
+PyObject *ps_checked_array(PyObject *obj, const char *name, int type, int other, const char *type_name, int ndim);
+
+/* Primary sample space of Metropolis chains: a proposal's numbers fetched, a proposal settled (primary.c). */
+PyObject *ps_primary_fetch(PyObject *module, PyObject *args);
+PyObject *ps_primary_settle(PyObject *module, PyObject *args);
 
 /* Shadow rays between surface points, returned (shadow.c; Accel.occluded_between traces them). */
 PyObject *ps_shadow_rays(PyObject *module, PyObject *args, PyObject *kwargs);

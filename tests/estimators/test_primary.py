@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from scipy import special, stats
 
+from pathspace import _native
 from pathspace.estimators.base import Counters
 from pathspace.estimators.bootstrap import bootstrap
 from pathspace.estimators.metropolis import Chains, Proposal, Target
@@ -39,7 +40,9 @@ def streams_of(seed: int):
 
 
 def _wrap(x):
-    return x - np.floor(x)
+    """x mod 1 in [0, 1), a value rounding up to 1.0 becoming 0.0 (as ext/primary.c wraps a moved number)."""
+    y = x - np.floor(x)
+    return np.where(y >= 1.0, 0.0, y)
 
 
 @pytest.mark.parametrize("step", STEPS, ids=lambda s: f"{s.kernel}-{s.size:g}")
@@ -163,7 +166,7 @@ def test_chunked_catch_up_sums_each_numbers_own_steps(monkeypatch):
     counts = np.array([7, 1, 12, 3, 0, 2, 9])
     at_once = step.steps(counts, source)
     assert [c.size for c in calls] == [10, 10, 10, 10, 10, 10, 8]       # 34 steps: 6 chunks of 5 and one of 4
-    u = np.concatenate([c.reshape(2, -1) for c in calls], axis=1)
+    u = np.concatenate(calls).reshape(-1, 2).T                          # a pair per step: magnitude, sign
     single = 0.2 * 16.0 ** -u[0] * np.where(u[1] < 0.5, -1.0, 1.0)
     ends = np.cumsum(counts)
     expected = [single[end - count:end].sum() for count, end in zip(counts, ends)]
@@ -324,6 +327,148 @@ def test_fresh_states_serve_the_stream_s_uniforms_and_clear_what_they_drew():
     np.testing.assert_array_equal(states.numbers(np.arange(k), proposal=True)[:, :40], drawn)
     states.clear()
     assert np.isnan(states.proposal).all() and states.current is None
+
+
+# -- the C kernels against a number-by-number reference ---------------------------------------------------
+
+def reference_fetch(states: ChainStates, rows, columns, uniforms):
+    """ChainStates.fetch number by number in NumPy (the order ext/primary.c draws in), on copies of the state:
+    (numbers, flat indices drawn, proposal, current, stamp)."""
+    proposal, current, stamp = (None if a is None else a.copy() for a in (states.proposal, states.current,
+                                                                           states.stamp))
+    c, step, out, drawn = states.counters, states.step, [], []
+    for r, col in zip(rows, columns):
+        if not np.isnan(proposal[col, r]):
+            out.append(proposal[col, r])
+            continue
+        if states.fresh or (not states.replay and c["large"][r]):
+            value = uniforms(1)[0]
+        else:
+            x, accepted = current[col, r], c["accepted"][r]
+            if stamp[col, r] < c["last_large"][r]:
+                x = uniforms(1)[0]
+            elif stamp[col, r] < accepted:
+                x = _wrap(x + step.steps(np.array([accepted - stamp[col, r]]), uniforms)[0])
+            current[col, r], stamp[col, r] = x, accepted
+            value = x if states.replay else _wrap(x + step.single(1, uniforms)[0])
+        proposal[col, r] = value
+        out.append(value)
+        drawn.append(col * states.chains + r)
+    return np.array(out), np.array(drawn, np.int64), proposal, current, stamp
+
+
+def random_states(seed: int, step: SmallStep | None, chains: int = 40, width: int = 12, lag: int = 300,
+                  fresh: bool = False) -> ChainStates:
+    """States with numbers at every stage: drawn by the proposal or not, never drawn, replaced by an accepted
+    large step since, missing up to ``lag`` accepted small steps; chains on large or small steps."""
+    rng = np.random.default_rng(seed)
+    states = ChainStates(chains, step, uniforms_of(seed, (1,)), width=width, fresh=fresh)
+    states.proposal[...] = np.where(rng.random((width, chains)) < 0.3, rng.random((width, chains)), np.nan)
+    c = states.counters
+    c["accepted"][:] = rng.integers(0, lag, chains)
+    c["last_large"][:] = (c["accepted"] * rng.random(chains) ** 4).astype(np.int64)
+    c["large"][:] = rng.random(chains) < 0.3
+    if not fresh:
+        states.current[...] = rng.random((width, chains))
+        states.stamp[...] = np.minimum(rng.integers(-1, lag, (width, chains)), c["accepted"])
+    return states
+
+
+def some_numbers(seed: int, chains: int, width: int, k: int):
+    """k distinct (row, column) pairs of the stored state, in a random order."""
+    cells = np.random.default_rng(seed).permutation(chains * width)[:k]
+    return cells % chains, cells // chains
+
+
+@pytest.mark.parametrize("step", STEPS + [SmallStep("exponential", 0.25)], ids=lambda s: f"{s.kernel}-{s.size:g}")
+@pytest.mark.parametrize("mode", ["chain", "replay", "fresh"])
+def test_fetch_kernel_draws_each_number_as_the_reference(step, mode):
+    """primary_fetch against the number-by-number reference: the same numbers (to rounding: C's and NumPy's exp,
+    log1p and cos), the same state afterwards, the same flat indices drawn, and the stream left at the same
+    place.  Exponential steps of 1/4 have a catch-up limit of 125 steps, so lags of up to 300 cross it."""
+    states = random_states(20, None if mode == "fresh" else step, fresh=mode == "fresh")
+    states.replay = mode == "replay"
+    rows, columns = some_numbers(21, states.chains, states.width, 400)
+    reference = uniforms_of(20, (1,))
+    expected, drawn, proposal, current, stamp = reference_fetch(states, rows, columns, reference)
+    got = states.fetch(rows, columns)
+    np.testing.assert_allclose(got, expected, rtol=1e-13, atol=1e-15)
+    assert np.all((got >= 0.0) & (got < 1.0))
+    np.testing.assert_array_equal(np.concatenate(states.drawn), drawn)
+    np.testing.assert_allclose(states.proposal[:, :states.chains][:proposal.shape[0]], proposal, rtol=1e-13,
+                               atol=1e-15, equal_nan=True)
+    if mode != "fresh":
+        np.testing.assert_allclose(states.current[:current.shape[0]], current, rtol=1e-13, atol=1e-15)
+        np.testing.assert_array_equal(states.stamp[:stamp.shape[0]], stamp)
+    assert states.uniforms(1)[0] == reference(1)[0]   # both consumed the same count
+    assert 0 < drawn.size < rows.size
+
+
+def test_fetch_kernel_draws_long_catch_ups_in_chunks():
+    """A call needing more than 2^20 uniforms (exponential steps of 1/1000: limit 8.6e6 steps; lags of 6e5)
+    draws them chunk by chunk with the same result."""
+    step = SmallStep("exponential", 1e-3)
+    states = random_states(22, step, chains=6, width=2, lag=600_000)
+    states.counters["large"][:] = False
+    states.counters["last_large"][:] = 0
+    states.stamp[...] = 0
+    states.proposal[...] = np.nan
+    calls = []
+    source = uniforms_of(22, (1,))
+    states.uniforms = lambda k: calls.append(k) or source(k)
+    rows, columns = np.arange(6), np.zeros(6, np.int64)
+    expected = reference_fetch(states, rows, columns, uniforms_of(22, (1,)))[0]
+    np.testing.assert_allclose(states.fetch(rows, columns), expected, rtol=1e-10)
+    assert len(calls) > 1 and max(calls) == 1 << 20 and sum(calls) == 2 * states.counters["accepted"].sum() + 12
+
+
+def test_settle_kernel_takes_accepted_numbers_and_forgets_the_proposal():
+    states = random_states(23, SmallStep())
+    rows, columns = some_numbers(24, states.chains, states.width, 300)
+    states.fetch(rows, columns)
+    proposal, current, stamp = states.proposal.copy(), states.current.copy(), states.stamp.copy()
+    flat = np.concatenate(states.drawn)
+    accept = np.random.default_rng(25).random(states.chains) < 0.5
+    states.settle(accept)
+    taken = flat[accept[flat % states.chains]]
+    current.reshape(-1)[taken] = proposal.reshape(-1)[taken]
+    stamp.reshape(-1)[taken] = states.counters["accepted"][taken % states.chains] + 1
+    proposal.reshape(-1)[flat] = np.nan
+    np.testing.assert_array_equal(states.current, current)
+    np.testing.assert_array_equal(states.stamp, stamp)
+    np.testing.assert_array_equal(states.proposal, proposal)
+    assert states.drawn == []
+
+
+def test_primary_kernels_refuse_bad_arguments():
+    states = random_states(26, SmallStep())
+    c = states.counters
+    args = lambda rows, columns, draw=states.uniforms: (states.proposal, states.current, states.stamp,  # noqa: E731
+                                                       rows, columns, c["accepted"], c["last_large"], c["large"],
+                                                       0, 0, 1 / 64, 33497.0, draw)
+    one = np.zeros(1, np.int64)
+    with pytest.raises(IndexError, match=r"outside the \(12, 40\) state"):
+        _native.primary_fetch(*args(one + 40, one))
+    with pytest.raises(IndexError, match="outside"):
+        _native.primary_fetch(*args(one, one - 1))
+    with pytest.raises(TypeError, match="rows must be a 1D int64"):
+        _native.primary_fetch(*args(one.astype(np.int32), one))
+    with pytest.raises(ValueError, match="columns must have length 1"):
+        _native.primary_fetch(*args(one, np.zeros(2, np.int64)))
+    states.proposal[5, 0], c["large"][0] = np.nan, True                   # a large step: one uniform
+    with pytest.raises(ValueError, match=r"draw\(1\) returned 0 numbers"):
+        _native.primary_fetch(*args(one, one + 5, lambda k: np.zeros(k - 1)))
+    with pytest.raises(TypeError, match="draw must be callable"):
+        _native.primary_fetch(*args(one, one, None))
+    with pytest.raises(ValueError, match="accepted must have length 40"):
+        _native.primary_fetch(states.proposal, states.current, states.stamp, one, one, c["accepted"][:3],
+                              c["last_large"], c["large"], 0, 0, 1 / 64, 1e4, states.uniforms)
+    with pytest.raises(ValueError, match="same"):
+        _native.primary_fetch(states.proposal, states.current[:3], states.stamp, one, one, c["accepted"],
+                              c["last_large"], c["large"], 0, 0, 1 / 64, 1e4, states.uniforms)
+    with pytest.raises(IndexError, match="flat\\[1\\] is outside the state of 480 numbers"):
+        _native.primary_settle(states.proposal, states.current, states.stamp, np.array([0, 480]),
+                               np.ones(40, bool), c["accepted"])
 
 
 class Broken(Toy):

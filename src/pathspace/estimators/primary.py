@@ -22,7 +22,9 @@ cost 2n uniforms, so from :attr:`SmallStep.catch_up_limit` missed steps on
 (where their sum modulo 1 is within 1e-12 of uniform in total variation)
 the number is replaced by a fresh uniform instead.
 
-:class:`ChainStates` holds the chains' numbers of one stream; a
+:class:`ChainStates` holds the chains' numbers of one stream (fetched and
+settled by C kernels, ``ext/primary.c``, tested against this module's
+:class:`SmallStep`); a
 :class:`PrimarySampler` serves a proposal's numbers to an estimator through
 the :class:`~pathspace.sampler.Sampler` protocol, so any estimator with an
 ``evaluate`` on given numbers (PT, BDPT) runs on a chain's proposal unchanged.
@@ -35,17 +37,13 @@ from typing import Callable
 
 import numpy as np
 
+from .. import _native
+
 __all__ = ["SmallStep", "ChainStates", "PrimarySampler", "KERNELS", "Uniforms", "new_counters", "advance", "film_position",
            "exponential_catch_up_limit"]
 
 KERNELS = ("exponential", "gaussian")
 Uniforms = Callable[[int], np.ndarray]  # k -> k uniform numbers in [0, 1) (float64)
-
-
-def _wrap(x: np.ndarray) -> np.ndarray:
-    """x mod 1 in [0, 1) (a value rounding up to 1.0 becomes 0.0)."""
-    y = x - np.floor(x)
-    return np.where(y >= 1.0, 0.0, y)
 
 
 @dataclass(frozen=True)
@@ -79,7 +77,9 @@ class SmallStep:
         return exponential_catch_up_limit(self.size) if self.kernel == "exponential" else np.inf
 
     def steps(self, count: np.ndarray, uniforms: Uniforms) -> np.ndarray:
-        """The sum of ``count[i]`` independent steps for every i (0 for a count of 0), float64."""
+        """The sum of ``count[i]`` independent steps for every i (0 for a count of 0), float64.  The uniforms are
+        consumed number after number: a pair per exponential step (magnitude, sign), one pair per number for
+        the Gaussian (Box-Muller), one uniform for a number past :attr:`catch_up_limit`."""
         count = np.asarray(count, dtype=np.int64)
         out = np.zeros(count.size)
         moved = np.flatnonzero(count > 0)
@@ -87,8 +87,8 @@ class SmallStep:
             return out
         n = count.take(moved)
         if self.kernel == "gaussian":
-            u = uniforms(2 * moved.size).reshape(2, -1)
-            normal = np.sqrt(-2.0 * np.log1p(-u[0])) * np.cos(2.0 * np.pi * u[1])  # Box-Muller
+            u = uniforms(2 * moved.size)
+            normal = np.sqrt(-2.0 * np.log1p(-u[0::2])) * np.cos(2.0 * np.pi * u[1::2])  # Box-Muller
             out[moved] = self.size * np.sqrt(n) * normal
             return out
         # Past the limit the sum modulo 1 is uniform to within 1e-12: one uniform (a "step" in [0, 1)) stands
@@ -104,7 +104,7 @@ class SmallStep:
         # The steps of consecutive numbers are summed in chunks of at most CATCH_UP_CHUNK (a bounded memory).
         for first in range(0, total, CATCH_UP_CHUNK):
             last = min(first + CATCH_UP_CHUNK, total)
-            single = self._exponential(uniforms(2 * (last - first)).reshape(2, -1))
+            single = self._exponential(uniforms(2 * (last - first)))
             if first == 0 and last == total:
                 out[moved] = single if total == moved.size else np.add.reduceat(single, ends - n)
                 break
@@ -118,11 +118,11 @@ class SmallStep:
         """``count`` independent single steps (a small step's move of each number), float64."""
         if self.kernel == "gaussian":
             return self.steps(np.ones(count, np.int64), uniforms)
-        return self._exponential(uniforms(2 * count).reshape(2, -1))
+        return self._exponential(uniforms(2 * count))
 
     def _exponential(self, u: np.ndarray) -> np.ndarray:
-        """Exponential steps from uniforms u (2, n): magnitude from u[0], sign from u[1]."""
-        return self.size * np.exp(-np.log(16.0) * u[0]) * np.where(u[1] < 0.5, -1.0, 1.0)
+        """Exponential steps from uniforms u (2n,), a pair per step: the magnitude, then the sign."""
+        return self.size * np.exp(-np.log(16.0) * u[0::2]) * np.where(u[1::2] < 0.5, -1.0, 1.0)
 
     def pdf(self, x: np.ndarray, y: np.ndarray) -> np.ndarray:
         """Density of one step from ``x`` to ``y`` on the circle (per coordinate; symmetric in x and y)."""
@@ -193,6 +193,9 @@ class ChainStates:
         self.stamp = None if fresh else np.full((width, chains), -1, dtype=np.int64)
         self.drawn: list[np.ndarray] = []   # flat indices of the numbers the proposal has drawn (or was given)
         self.replay = False   # True: the "proposal" is the current state itself (to evaluate a chain's start)
+        # primary_fetch's small step: kernel index, size, catch-up limit (fresh states take no step)
+        self._kernel = (0, 1.0, np.inf) if step is None else (KERNELS.index(step.kernel), step.size,
+                                                              step.catch_up_limit)
 
     @property
     def chains(self) -> int:
@@ -213,69 +216,41 @@ class ChainStates:
             self.stamp = np.concatenate([self.stamp, np.full((extra, self.chains), -1, np.int64)])
 
     def fetch(self, rows: np.ndarray, columns: np.ndarray) -> np.ndarray:
-        """The proposal's numbers ``columns`` of chains ``rows`` (same shapes), drawing those not drawn yet."""
+        """The proposal's numbers ``columns`` of chains ``rows`` (same shapes), drawing those not drawn yet: fresh
+        uniforms for fresh states and large steps; else the current numbers, brought up to date, moved by one
+        small step (or, with ``replay``, the current numbers themselves).  One pass in C
+        (``_native.primary_fetch``): a number's uniforms are the next of the stream, number by number in the
+        order asked, its catch-up before its step (what :meth:`SmallStep.steps` and :meth:`SmallStep.single`
+        draw for it alone)."""
+        rows = np.ascontiguousarray(rows, dtype=np.int64)
+        columns = np.ascontiguousarray(columns, dtype=np.int64)
         if int(columns.max(initial=-1)) >= self.width:
             self._grow(int(columns.max()) + 1)
-        flat = columns * self.chains + rows
-        proposal = self.proposal.reshape(-1)
-        u = proposal.take(flat)
-        missing = np.flatnonzero(np.isnan(u))
-        if missing.size:
-            where = flat.take(missing)
-            drawn = self.uniforms(where.size) if self.fresh else self._propose(rows.take(missing), where)
-            u[missing] = drawn
-            proposal.put(where, drawn)
-            self.drawn.append(where)
-        return u
+        counters = (None, None, None) if self.fresh else (self.counters["accepted"], self.counters["last_large"],
+                                                          self.counters["large"])
+        u, drawn = _native.primary_fetch(self.proposal, self.current, self.stamp, rows.reshape(-1),
+                                         columns.reshape(-1), *counters, self._mode, *self._kernel, self.uniforms)
+        if drawn.size:
+            self.drawn.append(drawn)
+        return u.reshape(rows.shape)
 
-    def _propose(self, r: np.ndarray, flat: np.ndarray) -> np.ndarray:
-        """The proposal's numbers at ``flat`` (indices into the (width, chains) arrays) of chains ``r``: fresh
-        uniforms for a large step; else the current numbers, brought up to date, moved by one small step."""
-        if self.replay:
-            return self._current(r, flat)
-        large = self.counters["large"].take(r)
-        if not large.any():
-            return _wrap(self._current(r, flat) + self.step.single(r.size, self.uniforms))
-        proposed = np.empty(r.size)
-        k = np.flatnonzero(large)
-        proposed[k] = self.uniforms(k.size)
-        k = np.flatnonzero(~large)
-        if k.size:
-            proposed[k] = _wrap(self._current(r.take(k), flat.take(k)) + self.step.single(k.size, self.uniforms))
-        return proposed
-
-    def _current(self, r: np.ndarray, flat: np.ndarray) -> np.ndarray:
-        """Bring the current numbers at ``flat`` of chains ``r`` up to date (see the module docstring) and store
-        them: a small step's proposal depends on them, so the chain must keep what it drew.  (A large step's
-        does not: its numbers stay as they were, and catch up when a later proposal uses them.)"""
-        accepted, last_large = self.counters["accepted"].take(r), self.counters["last_large"].take(r)
-        stamp, current = self.stamp.reshape(-1).take(flat), self.current.reshape(-1).take(flat)
-        fresh = np.flatnonzero(stamp < last_large)      # replaced by an accepted large step since (or never drawn)
-        if fresh.size:
-            current[fresh] = self.uniforms(fresh.size)
-            stamp[fresh] = accepted.take(fresh)
-        lagging = np.flatnonzero(stamp < accepted)     # accepted small steps since it was last brought up to date
-        if lagging.size:
-            moved = current.take(lagging) + self.step.steps(accepted.take(lagging) - stamp.take(lagging), self.uniforms)
-            current[lagging] = _wrap(moved)
-        self.current.reshape(-1).put(flat, current)
-        self.stamp.reshape(-1).put(flat, accepted)
-        return current
+    @property
+    def _mode(self) -> int:
+        """primary_fetch's mode: 0 chains stepping, 1 replaying their current state, 2 fresh uniforms."""
+        return 2 if self.fresh else 1 if self.replay else 0
 
     def settle(self, accept: np.ndarray) -> None:
         """End the proposal: the chains ``accept`` (bool per chain) take its numbers, the others keep theirs.
         Call once per stream, then :func:`advance` the shared counters once."""
         if self.drawn:
-            flat = np.concatenate(self.drawn)
-            taken = flat.take(np.flatnonzero(accept.take(flat % self.chains)))
-            self.current.reshape(-1).put(taken, self.proposal.reshape(-1).take(taken))
-            self.stamp.reshape(-1).put(taken, self.counters["accepted"].take(taken % self.chains) + 1)
-        self.clear()
+            _native.primary_settle(self.proposal, self.current, self.stamp, np.concatenate(self.drawn),
+                                   np.ascontiguousarray(accept, dtype=bool), self.counters["accepted"])
+        self.drawn = []
 
     def clear(self) -> None:
         """Forget the proposal's numbers (at a cost of the numbers it drew, not of the whole state)."""
         if self.drawn:
-            self.proposal.reshape(-1).put(np.concatenate(self.drawn), np.nan)
+            _native.primary_settle(self.proposal, None, None, np.concatenate(self.drawn), None, None)
         self.drawn = []
 
     def load(self, rows: np.ndarray, numbers: np.ndarray) -> None:
