@@ -56,6 +56,13 @@ static PyMethodDef module_methods[] = {
      "shadow_rays(a, n_a, eps_a, b, n_b, eps_b, lanes=None)\n--\n\n(origins (3, M), directions (3, M), tmax (M,)), "
      "float32: the rays Accel.occluded_between traces from tmin = RAY_TMIN, bit for bit those of "
      "pathspace.vecmath.shadow_ray (see ext/shadow.h)."},
+    {"path_geometry", ps_path_geometry, METH_VARARGS,
+     "path_geometry(p, n, k)\n--\n\n(w (3, N, K-1), g_fwd (N, K), g_rev (N, K), segments (N,)), float64: the unit "
+     "directions of the segments of paths with vertices p and normals n ((3, N, K) float32) and k (N,) segments, "
+     "their |cos| / d^2 at both ends and the product of those at their starts (see ext/paths.c)."},
+    {"split_densities", ps_split_densities, METH_VARARGS,
+     "split_densities(fwd, rev, delta, first, count)\n--\n\n(N,) float64: per path, the densities of making its "
+     "vertices first .. first + count - 1 by walks from both ends, summed over the splits (see ext/paths.c)."},
     {"primary_fetch", ps_primary_fetch, METH_VARARGS,
      "primary_fetch(proposal, current, stamp, rows, columns, accepted, last_large, large, mode, kernel, size, "
      "limit, draw)\n--\n\n(numbers (N,), flat indices drawn (M,)): the proposal's numbers at (rows, columns) of "

@@ -26,6 +26,11 @@ PyObject *ps_hit_geometry(PyObject *module, PyObject *args);
  * `name` (geometry.c). */
 PyObject *ps_checked_array(PyObject *obj, const char *name, int type, int other, const char *type_name, int ndim);
 
+/* Segment directions and geometric factors of explicit paths (paths.c). */
+PyObject *ps_path_geometry(PyObject *module, PyObject *args);
+/* Densities of regenerating a run of a path's vertices, summed over the splits between its two walks (paths.c). */
+PyObject *ps_split_densities(PyObject *module, PyObject *args);
+
 /* Primary sample space of Metropolis chains: a proposal's numbers fetched, a proposal settled (primary.c). */
 PyObject *ps_primary_fetch(PyObject *module, PyObject *args);
 PyObject *ps_primary_settle(PyObject *module, PyObject *args);

@@ -55,6 +55,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import _native
 from ..vecmath import orthonormal_basis
 from .path_walks import (Uniforms, bsdf_direction, camera_direction, emission_direction, film_positions, light_points,
                          lobe_numbers, unit, walk)
@@ -129,22 +130,11 @@ class Lengths:
 def split_densities(values: PathValues, first: np.ndarray, count: np.ndarray) -> np.ndarray:
     """sum_j p_j over the count + 1 splits j of vertices ``first`` .. ``first + count - 1`` of each path, p_j the
     density of making them by j steps of a walk from vertex ``first - 1`` and ``count - j`` steps of a walk from
-    vertex ``first + count``, joined between them; splits whose join touches a specular vertex have density 0."""
-    size, slots = values.fwd.shape
-    lanes = np.arange(size)
-    slot = np.arange(slots)[None, :]
-    inside = (slot >= first[:, None]) & (slot < (first + count)[:, None])
-    light_walk = np.cumprod(np.where(inside, values.fwd, 1.0), axis=1)               # prod fwd over first .. i
-    camera_walk = np.cumprod(np.where(inside, values.rev, 1.0)[:, ::-1], axis=1)[:, ::-1]  # prod rev over i .. end
-    total = np.zeros(size)
-    for j in range(int(count.max(initial=0)) + 1):
-        last = first - 1 + j                 # the light walk's last vertex (-1: none, a camera walk found the light)
-        light = np.where(last >= first, light_walk[lanes, np.clip(last, 0, slots - 1)], 1.0)
-        camera = np.where(last + 1 < first + count, camera_walk[lanes, np.clip(last + 1, 0, slots - 1)], 1.0)
-        joinable = (last < 0) | ~(values.delta[lanes, np.clip(last, 0, slots - 1)]
-                                  | values.delta[lanes, np.clip(last + 1, 0, slots - 1)])
-        total += np.where((j <= count) & joinable, light * camera, 0.0)
-    return total
+    vertex ``first + count``, joined between them; splits whose join touches a specular vertex have density 0.
+    One C pass over the paths (``ext/paths.c``)."""
+    fwd, rev, delta = (np.ascontiguousarray(a) for a in (values.fwd, values.rev, values.delta))
+    return _native.split_densities(fwd, rev, delta, np.ascontiguousarray(first, dtype=np.int64),
+                                   np.ascontiguousarray(count, dtype=np.int64))
 
 
 def _regenerate(space: Space, y: Paths, lanes: np.ndarray, light_end: np.ndarray, light_steps: np.ndarray,

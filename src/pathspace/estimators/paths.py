@@ -48,6 +48,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import _native
 from ..bsdfs import MaterialLanes, Surface
 from ..spectra import RGBColours, RGBMode
 from ..vecmath import dot
@@ -236,19 +237,10 @@ def evaluate(space: Space, paths: Paths) -> PathValues:
     count, slots = paths.material.shape
     lanes = np.arange(count)
     k = paths.k
-    p = paths.p.astype(np.float64)
-    n = paths.n.astype(np.float64)
-    edge = p[:, :, 1:] - p[:, :, :-1]                       # segment i: from x_i to x_{i+1}
-    dist2 = (edge * edge).sum(axis=0)
-    on_path = np.arange(slots - 1)[None, :] < k[:, None]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        w = np.where(on_path, edge / np.sqrt(np.where(on_path, dist2, 1.0)), 0.0)
-        cos_start = np.abs((n[:, :, :-1] * w).sum(axis=0))   # at x_i toward x_{i+1}
-        cos_end = np.abs((n[:, :, 1:] * w).sum(axis=0))      # at x_{i+1} toward x_i
-        g_fwd = np.zeros((count, slots))
-        g_rev = np.zeros((count, slots))
-        g_fwd[:, 1:] = np.where(on_path & (dist2 > 0), cos_end / dist2, 0.0)
-        g_rev[:, :-1] = np.where(on_path & (dist2 > 0), cos_start / dist2, 0.0)
+    # Segment i, x_i -> x_{i+1}: its unit direction w[:, :, i], g_rev[:, i] = |cos| at x_i / d^2 and
+    # g_fwd[:, i + 1] = |cos| at x_{i+1} / d^2; segments = the product of the g_rev (ext/paths.c).
+    w, g_fwd, g_rev, segments = _native.path_geometry(np.ascontiguousarray(paths.p), np.ascontiguousarray(paths.n),
+                                                      np.ascontiguousarray(k, dtype=np.int64))
     fwd, rev = np.zeros((count, slots)), np.zeros((count, slots))
     delta = np.zeros((count, slots), bool)
     f = np.ones((colours.channels, count))
@@ -269,9 +261,8 @@ def evaluate(space: Space, paths: Paths) -> PathValues:
             scene, colours.take(row), paths.material[row, col], paths.n[:, row, col], -w[:, row, col - 1],
             w[:, row, col])
         terminated[row[dispersed]] = True
-        factor = np.ones((colours.channels, count, slots))
-        factor[:, row, col] = f_cos
-        f *= factor.prod(axis=2)
+        starts = np.flatnonzero(np.diff(row, prepend=-1))    # row ascends (np.nonzero): each path's vertices
+        f[:, row.take(starts)] *= np.multiply.reduceat(f_cos, starts, axis=1)
         rev[row, col - 1] = pdf_prev * g_rev[row, col - 1]
         nxt = col + 1 < k[row]
         g_fwd[row[nxt], col[nxt] + 1] *= snell[nxt]
@@ -283,8 +274,7 @@ def evaluate(space: Space, paths: Paths) -> PathValues:
     toward_path = -w[:, lanes, last]                         # from the camera to x_{k-1}
     pdf_camera = camera.pdf_direction(toward_path.astype(np.float32))
     rev[lanes, last] = pdf_camera * g_rev[lanes, last]
-    segments = np.where(on_path, np.divide(cos_start, dist2, out=np.zeros_like(dist2), where=dist2 > 0), 1.0)
-    f *= segments.prod(axis=1) * pdf_camera
+    f *= segments * pdf_camera
     raster, inside = camera.raster(paths.p[:, lanes, last])
     kept = inside & (k >= 1) & np.isfinite(f).all(axis=0)
     if space.specular_only:
