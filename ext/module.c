@@ -69,7 +69,8 @@ static PyMethodDef module_methods[] = {
      "Metropolis chain states, drawing those not drawn yet with uniforms from draw(k) (see ext/primary.c)."},
     {"primary_settle", ps_primary_settle, METH_VARARGS,
      "primary_settle(proposal, current, stamp, flat, accept, accepted)\n--\n\nEnd a proposal: the chains that "
-     "accept take its numbers at flat, and they are forgotten (see ext/primary.c)."},
+     "accept take its numbers at flat, and they are forgotten; with current None (fresh states) they are only "
+     "forgotten (see ext/primary.c)."},
     {"default_thread_count", default_thread_count, METH_NOARGS,
      "default_thread_count()\n--\n\nNumber of cores this process may run on."},
     {NULL, NULL, 0, NULL},

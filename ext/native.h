@@ -5,6 +5,14 @@
 #define PY_SSIZE_T_CLEAN
 #include <Python.h>
 
+#include <float.h>
+
+/* The kernels that replace NumPy expressions compute as NumPy does, in plain IEEE arithmetic (and setup.py
+ * turns FMA contraction off): a build that would reassociate or keep excess precision is refused. */
+#if defined(__FAST_MATH__) || FLT_EVAL_METHOD != 0
+#error "the C kernels must be built in plain IEEE arithmetic, as NumPy computes: no -ffast-math or excess precision"
+#endif
+
 #include "embree4_api.h"
 
 /* Embree loader (embree_loader.c). */

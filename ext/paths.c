@@ -149,11 +149,14 @@ PyObject *ps_split_densities(PyObject *module, PyObject *args)
     const int64_t *start = (const int64_t *)PyArray_DATA(first), *length = (const int64_t *)PyArray_DATA(count);
     double *out = (double *)PyArray_DATA(total), *light_walk = walks, *camera_walk = walks + slots;
     npy_intp bad = -1;
+    int64_t bad_first = 0, bad_count = 0;
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp i = 0; i < lanes; ++i) {
         int64_t a = start[i], m = length[i];   /* read once: checked, then used */
         if (a < 0 || m < 0 || a > INT64_MAX / 2 || m > INT64_MAX / 2) {
             bad = i;
+            bad_first = a;
+            bad_count = m;
             break;
         }
         const double *fi = f + i * slots, *ri = r + i * slots;
@@ -186,7 +189,7 @@ PyObject *ps_split_densities(PyObject *module, PyObject *args)
     free(walks);
     if (bad >= 0) {
         PyErr_Format(PyExc_ValueError, "first[%zd] = %lld and count[%zd] = %lld: both must be >= 0", (Py_ssize_t)bad,
-                     (long long)start[bad], (Py_ssize_t)bad, (long long)length[bad]);
+                     (long long)bad_first, (Py_ssize_t)bad, (long long)bad_count);
         Py_DECREF(total);
         return NULL;
     }

@@ -2,7 +2,7 @@
  * Shadow rays between surface points (Accel.occluded_between, _native.shadow_rays): each segment's ray is
  * built as pathspace.vecmath.shadow_ray builds it, in the same float32 operations in the same order (so the
  * rays are bit for bit the NumPy reference's; setup.py turns FMA contraction off, and a build that would
- * reassociate or keep excess precision is refused below).
+ * reassociate or keep excess precision is refused in native.h).
  */
 #ifndef PATHSPACE_SHADOW_H
 #define PATHSPACE_SHADOW_H
@@ -12,10 +12,6 @@
 #include <float.h>
 #include <math.h>
 #include <stdint.h>
-
-#if defined(__FAST_MATH__) || FLT_EVAL_METHOD != 0
-#error "shadow rays must be built in plain IEEE float32, as NumPy builds them: no -ffast-math, no excess precision"
-#endif
 
 /* pathspace.vecmath's gamma(SHADOW_END_ROUNDINGS = 4) in float32, as NumPy multiplies a float32 array by it. */
 #define SHADOW_END_SLACK ((float)(4.0 * 0x1p-24 / (1.0 - 4.0 * 0x1p-24)))

@@ -395,8 +395,7 @@ def test_fetch_kernel_draws_each_number_as_the_reference(step, mode):
     np.testing.assert_allclose(got, expected, rtol=1e-13, atol=1e-15)
     assert np.all((got >= 0.0) & (got < 1.0))
     np.testing.assert_array_equal(np.concatenate(states.drawn), drawn)
-    np.testing.assert_allclose(states.proposal[:, :states.chains][:proposal.shape[0]], proposal, rtol=1e-13,
-                               atol=1e-15, equal_nan=True)
+    np.testing.assert_allclose(states.proposal, proposal, rtol=1e-13, atol=1e-15, equal_nan=True)
     if mode != "fresh":
         np.testing.assert_allclose(states.current[:current.shape[0]], current, rtol=1e-13, atol=1e-15)
         np.testing.assert_array_equal(states.stamp[:stamp.shape[0]], stamp)
@@ -422,9 +421,29 @@ def test_fetch_kernel_draws_long_catch_ups_in_chunks():
     assert len(calls) > 1 and max(calls) == 1 << 20 and sum(calls) == 2 * states.counters["accepted"].sum() + 12
 
 
-def test_settle_kernel_takes_accepted_numbers_and_forgets_the_proposal():
-    states = random_states(23, SmallStep())
-    rows, columns = some_numbers(24, states.chains, states.width, 300)
+def test_fetch_kernel_catches_up_at_the_limit():
+    """Lags of limit - 1 steps are summed (2 uniforms a step), lags of limit and limit + 1 are one uniform."""
+    step = SmallStep("exponential", 0.25)
+    limit = int(step.catch_up_limit)
+    states = random_states(27, step, chains=3, width=1)
+    states.proposal[...], states.stamp[...] = np.nan, 0
+    states.counters["large"][:], states.counters["last_large"][:] = False, 0
+    states.counters["accepted"][:] = [limit - 1, limit, limit + 1]
+    calls = []
+    source = uniforms_of(27, (1,))
+    states.uniforms = lambda k: calls.append(k) or source(k)
+    rows, columns = np.arange(3), np.zeros(3, np.int64)
+    expected = reference_fetch(states, rows, columns, uniforms_of(27, (1,)))[0]
+    np.testing.assert_allclose(states.fetch(rows, columns), expected, rtol=1e-13)
+    assert calls == [2 * (limit - 1) + 2 + (1 + 2) + (1 + 2)]
+
+
+@pytest.mark.parametrize("chains", [40, 49, 1000003])
+def test_settle_kernel_takes_accepted_numbers_and_forgets_the_proposal(chains):
+    """Also at chain counts whose flat indices test the settle's remainder without a division (49: 49, 98, ...
+    sit where a quotient rounded up would read accept[-1])."""
+    states = random_states(23, SmallStep(), chains=chains, width=12 if chains < 1000 else 2)
+    rows, columns = some_numbers(24, states.chains, states.width, min(300 * chains // 40, 200_000))
     states.fetch(rows, columns)
     proposal, current, stamp = states.proposal.copy(), states.current.copy(), states.stamp.copy()
     flat = np.concatenate(states.drawn)
@@ -456,7 +475,7 @@ def test_primary_kernels_refuse_bad_arguments():
     with pytest.raises(ValueError, match="columns must have length 1"):
         _native.primary_fetch(*args(one, np.zeros(2, np.int64)))
     states.proposal[5, 0], c["large"][0] = np.nan, True                   # a large step: one uniform
-    with pytest.raises(ValueError, match=r"draw\(1\) returned 0 numbers"):
+    with pytest.raises(ValueError, match=r"draw\(1\) must return 1 uniforms"):
         _native.primary_fetch(*args(one, one + 5, lambda k: np.zeros(k - 1)))
     with pytest.raises(TypeError, match="draw must be callable"):
         _native.primary_fetch(*args(one, one, None))
@@ -469,6 +488,78 @@ def test_primary_kernels_refuse_bad_arguments():
     with pytest.raises(IndexError, match="flat\\[1\\] is outside the state of 480 numbers"):
         _native.primary_settle(states.proposal, states.current, states.stamp, np.array([0, 480]),
                                np.ones(40, bool), c["accepted"])
+
+
+def test_fetch_kernel_failures_leave_no_number_drawn():
+    """A pair asked for twice, a draw() that raises (here in the second chunk of a long catch-up) and a state
+    changed during the call (so pass 1's count of uniforms no longer holds) are errors, and the proposal keeps
+    none of the numbers the call drew."""
+    states = random_states(28, SmallStep(), chains=8, width=3)
+    states.proposal[...] = np.nan
+    with pytest.raises(ValueError, match=r"\(rows, columns\)\[2\] asks again"):
+        states.fetch(np.array([0, 1, 0]), np.array([2, 2, 2]))
+    assert np.isnan(states.proposal).all() and states.drawn == []
+
+    long = random_states(29, SmallStep("exponential", 1e-3), chains=4, width=1, lag=600_000)
+    long.proposal[...], long.stamp[...], long.counters["last_large"][:] = np.nan, 0, 0
+    long.counters["large"][:] = False
+    long.counters["accepted"][:] = 500_000
+    source, calls = uniforms_of(29, (1,)), []
+
+    def failing(k):
+        calls.append(k)
+        if len(calls) == 2:
+            raise KeyError("no more numbers")
+        return source(k)
+
+    long.uniforms = failing
+    with pytest.raises(KeyError, match="no more numbers"):
+        long.fetch(np.arange(4), np.zeros(4, np.int64))
+    assert np.isnan(long.proposal).all() and long.drawn == [] and len(calls) == 2
+
+    changed = random_states(30, SmallStep(), chains=8, width=1)
+    changed.proposal[...], changed.counters["large"][:] = np.nan, True   # pass 1 counts one uniform each
+
+    def shifting(k):
+        changed.counters["large"][:] = False   # pass 2 then needs small steps: more uniforms than counted
+        return uniforms_of(30)(k)
+
+    changed.uniforms = shifting
+    with pytest.raises(RuntimeError, match="state changed during the call"):
+        changed.fetch(np.arange(8), np.zeros(8, np.int64))
+    assert np.isnan(changed.proposal).all()
+
+
+def test_a_step_that_rounds_up_to_one_wraps_to_zero():
+    """0 moved by a Gaussian step of -1e-17 is 1 - 1e-17 modulo 1, which rounds to 1.0: it must come back as
+    0.0, inside [0, 1)."""
+    step = SmallStep("gaussian", 0.01)
+    states = ChainStates(1, step, lambda k: np.array([0.5, 0.25 + 2.0 ** -54])[:k])
+    states.load(np.zeros(1, np.int64), np.zeros((1, 1)))
+    moved = step.single(1, lambda k: np.array([0.5, 0.25 + 2.0 ** -54]))[0]
+    assert -1e-16 < moved < 0.0 and 0.0 + moved - np.floor(moved) == 1.0
+    assert states.fetch(np.zeros(1, np.int64), np.zeros(1, np.int64))[0] == 0.0
+
+
+def test_chain_states_need_a_step_and_writeable_arrays():
+    with pytest.raises(ValueError, match="chains need a small step"):
+        ChainStates(4, None, uniforms_of(0))
+    states = random_states(31, SmallStep(), chains=4, width=2)
+    c = states.counters
+    args = [states.proposal, states.current, states.stamp, np.zeros(1, np.int64), np.zeros(1, np.int64),
+            c["accepted"], c["last_large"], c["large"], 0, 0, 1 / 64, 33497.0, states.uniforms]
+    frozen = states.proposal.copy()
+    frozen.flags.writeable = False
+    with pytest.raises(ValueError, match="proposal must be writeable"):
+        _native.primary_fetch(frozen, *args[1:])
+    for at, value, message in [(10, np.nan, "size must be finite"), (11, np.nan, "limit at least 1"),
+                               (11, 0.5, "limit at least 1")]:
+        with pytest.raises(ValueError, match=message):
+            _native.primary_fetch(*args[:at], value, *args[at + 1:])
+    states.proposal[0, 0], c["large"][0] = np.nan, True
+    with pytest.raises(ValueError, match=r"draw\(1\) must return 1 uniforms as a 1-D float64 array"):
+        _native.primary_fetch(*args[:-1], lambda k: np.ones(k, np.int64))
+    assert np.isnan(states.proposal[0, 0])
 
 
 class Broken(Toy):

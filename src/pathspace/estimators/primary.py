@@ -22,9 +22,8 @@ cost 2n uniforms, so from :attr:`SmallStep.catch_up_limit` missed steps on
 (where their sum modulo 1 is within 1e-12 of uniform in total variation)
 the number is replaced by a fresh uniform instead.
 
-:class:`ChainStates` holds the chains' numbers of one stream (fetched and
-settled by C kernels, ``ext/primary.c``, tested against this module's
-:class:`SmallStep`); a
+:class:`ChainStates` holds the chains' numbers of one stream (fetched and settled
+by C kernels, ``ext/primary.c``, tested against :class:`SmallStep`); a
 :class:`PrimarySampler` serves a proposal's numbers to an estimator through
 the :class:`~pathspace.sampler.Sampler` protocol, so any estimator with an
 ``evaluate`` on given numbers (PT, BDPT) runs on a chain's proposal unchanged.
@@ -39,8 +38,8 @@ import numpy as np
 
 from .. import _native
 
-__all__ = ["SmallStep", "ChainStates", "PrimarySampler", "KERNELS", "Uniforms", "new_counters", "advance", "film_position",
-           "exponential_catch_up_limit"]
+__all__ = ["SmallStep", "ChainStates", "PrimarySampler", "KERNELS", "Uniforms", "new_counters", "advance",
+           "film_position", "exponential_catch_up_limit"]
 
 KERNELS = ("exponential", "gaussian")
 Uniforms = Callable[[int], np.ndarray]  # k -> k uniform numbers in [0, 1) (float64)
@@ -79,7 +78,9 @@ class SmallStep:
     def steps(self, count: np.ndarray, uniforms: Uniforms) -> np.ndarray:
         """The sum of ``count[i]`` independent steps for every i (0 for a count of 0), float64.  The uniforms are
         consumed number after number: a pair per exponential step (magnitude, sign), one pair per number for
-        the Gaussian (Box-Muller), one uniform for a number past :attr:`catch_up_limit`."""
+        the Gaussian (Box-Muller), one uniform for a number past :attr:`catch_up_limit`.  For one number, this
+        is what ``ext/primary.c`` draws to catch it up (the tests' reference for the kernel); path-space MLT's
+        wavelength mutation takes single steps from it."""
         count = np.asarray(count, dtype=np.int64)
         out = np.zeros(count.size)
         moved = np.flatnonzero(count > 0)
@@ -184,6 +185,8 @@ class ChainStates:
 
     def __init__(self, chains: int, step: SmallStep | None, uniforms: Uniforms,
                  counters: dict[str, np.ndarray] | None = None, width: int = 16, fresh: bool = False) -> None:
+        if step is None and not fresh:
+            raise ValueError("chains need a small step (only fresh states, which hold no chains, take none)")
         self.step, self.uniforms, self.fresh = step, uniforms, fresh
         self.counters = counters if counters is not None else new_counters(chains)
         # Numbers are stored number by number: (width, chains), so that a wavefront drawing number j of its
