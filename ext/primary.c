@@ -102,7 +102,7 @@ static inline int next_uniform(Uniforms *u, double *x)
     return 0;
 }
 
-/* x mod 1 in [0, 1) (primary._wrap: a value rounding up to 1.0 becomes 0.0). */
+/* x mod 1 in [0, 1): x - floor(x), but a value that rounds up to 1.0 becomes 0.0. */
 static inline double wrap(double x)
 {
     double y = x - floor(x);
@@ -411,8 +411,8 @@ PyObject *ps_primary_settle(PyObject *module, PyObject *args)
             break;
         }
         if (!fresh) {
-            /* The chain f % chains, by a multiplication (an integer division per number cost a third of the
-             * call); the quotient is off by at most one, which the remainder's range check corrects. */
+            /* The chain f % chains, by a multiplication (an integer division per number cost about 15% of
+             * the call); the quotient is off by at most one, which the remainder's range check corrects. */
             int64_t r = f - (int64_t)((double)f * per_chain) * (int64_t)s.chains;
             r = r < 0 ? r + s.chains : r >= s.chains ? r - s.chains : r;
             if (accept[r]) {
