@@ -122,9 +122,11 @@ static long long catch_up_uniforms(const State *s, npy_intp flat, npy_intp r)
         return 1;
     if (stamp >= accepted)
         return 0;
-    if (s->kernel == KERNEL_GAUSSIAN || (double)(accepted - stamp) >= s->limit)
-        return s->kernel == KERNEL_GAUSSIAN ? 2 : 1;
-    return 2 * (long long)(accepted - stamp);
+    if (s->kernel == KERNEL_GAUSSIAN)
+        return 2;                              /* one normal of sigma sqrt(n): a pair */
+    if ((double)(accepted - stamp) >= s->limit)
+        return 1;                              /* past the catch-up limit: one uniform */
+    return 2 * (long long)(accepted - stamp);  /* a pair per exponential step */
 }
 
 /* How many uniforms drawing the proposal's number at flat (of chain r) consumes. */

@@ -403,18 +403,29 @@ def test_fetch_kernel_draws_each_number_as_the_reference(step, mode):
     assert 0 < drawn.size < rows.size
 
 
-def test_fetch_kernel_draws_long_catch_ups_in_chunks():
-    """A call needing more than 2^20 uniforms (exponential steps of 1/1000: limit 8.6e6 steps; lags of 6e5)
-    draws them chunk by chunk with the same result."""
-    step = SmallStep("exponential", 1e-3)
-    states = random_states(22, step, chains=6, width=2, lag=600_000)
-    states.counters["large"][:] = False
-    states.counters["last_large"][:] = 0
-    states.stamp[...] = 0
-    states.proposal[...] = np.nan
-    calls = []
-    source = uniforms_of(22, (1,))
+def lagging_states(seed: int, step: SmallStep, accepted) -> ChainStates:
+    """Chains on small steps, one number each, last brought up to date at 0 accepted steps and since missing
+    ``accepted[i]`` of them (no large step accepted); the proposal has drawn nothing."""
+    states = random_states(seed, step, chains=len(accepted), width=1)
+    states.proposal[...], states.stamp[...] = np.nan, 0
+    states.counters["large"][:], states.counters["last_large"][:] = False, 0
+    states.counters["accepted"][:] = accepted
+    return states
+
+
+def counted_draws(states: ChainStates, source) -> list[int]:
+    """Serve ``states``' uniforms from ``source``, recording the size of each draw in the returned list."""
+    calls: list[int] = []
     states.uniforms = lambda k: calls.append(k) or source(k)
+    return calls
+
+
+def test_fetch_kernel_draws_long_catch_ups_in_chunks():
+    """A call needing more than 2^20 uniforms (exponential steps of 1/1000: limit 8.6e6 steps; lags of 3e5 to
+    6e5) draws them chunk by chunk with the same result."""
+    states = lagging_states(22, SmallStep("exponential", 1e-3), np.random.default_rng(22).integers(300_000,
+                                                                                                   600_000, 6))
+    calls = counted_draws(states, uniforms_of(22, (1,)))
     rows, columns = np.arange(6), np.zeros(6, np.int64)
     expected = reference_fetch(states, rows, columns, uniforms_of(22, (1,)))[0]
     np.testing.assert_allclose(states.fetch(rows, columns), expected, rtol=1e-10)
@@ -425,13 +436,8 @@ def test_fetch_kernel_catches_up_at_the_limit():
     """Lags of limit - 1 steps are summed (2 uniforms a step), lags of limit and limit + 1 are one uniform."""
     step = SmallStep("exponential", 0.25)
     limit = int(step.catch_up_limit)
-    states = random_states(27, step, chains=3, width=1)
-    states.proposal[...], states.stamp[...] = np.nan, 0
-    states.counters["large"][:], states.counters["last_large"][:] = False, 0
-    states.counters["accepted"][:] = [limit - 1, limit, limit + 1]
-    calls = []
-    source = uniforms_of(27, (1,))
-    states.uniforms = lambda k: calls.append(k) or source(k)
+    states = lagging_states(27, step, [limit - 1, limit, limit + 1])
+    calls = counted_draws(states, uniforms_of(27, (1,)))
     rows, columns = np.arange(3), np.zeros(3, np.int64)
     expected = reference_fetch(states, rows, columns, uniforms_of(27, (1,)))[0]
     np.testing.assert_allclose(states.fetch(rows, columns), expected, rtol=1e-13)
@@ -500,19 +506,15 @@ def test_fetch_kernel_failures_leave_no_number_drawn():
         states.fetch(np.array([0, 1, 0]), np.array([2, 2, 2]))
     assert np.isnan(states.proposal).all() and states.drawn == []
 
-    long = random_states(29, SmallStep("exponential", 1e-3), chains=4, width=1, lag=600_000)
-    long.proposal[...], long.stamp[...], long.counters["last_large"][:] = np.nan, 0, 0
-    long.counters["large"][:] = False
-    long.counters["accepted"][:] = 500_000
-    source, calls = uniforms_of(29, (1,)), []
+    long = lagging_states(29, SmallStep("exponential", 1e-3), [500_000] * 4)
+    source = uniforms_of(29, (1,))
 
     def failing(k):
-        calls.append(k)
         if len(calls) == 2:
             raise KeyError("no more numbers")
         return source(k)
 
-    long.uniforms = failing
+    calls = counted_draws(long, failing)
     with pytest.raises(KeyError, match="no more numbers"):
         long.fetch(np.arange(4), np.zeros(4, np.int64))
     assert np.isnan(long.proposal).all() and long.drawn == [] and len(calls) == 2
