@@ -32,6 +32,25 @@ PyObject *ps_checked_array(PyObject *obj, const char *name, int type, int other,
     return obj;
 }
 
+PyObject *ps_rows_array(PyObject *obj, const char *name, int type, const char *type_name, Py_ssize_t rows)
+{
+    PyArrayObject *a = (PyArrayObject *)obj;
+    if (!PyArray_Check(obj) || PyArray_TYPE(a) != type || PyArray_NDIM(a) != 2 || !PyArray_ISNOTSWAPPED(a)) {
+        PyErr_Format(PyExc_TypeError, "%s must be a 2D %s array", name, type_name);
+        return NULL;
+    }
+    if (!PyArray_ISALIGNED(a) || (PyArray_DIM(a, 1) > 1 && PyArray_STRIDE(a, 1) != PyArray_ITEMSIZE(a)) ||
+        PyArray_STRIDE(a, 0) % PyArray_ITEMSIZE(a) != 0) {
+        PyErr_Format(PyExc_ValueError, "%s must be aligned, with contiguous rows", name);
+        return NULL;
+    }
+    if (rows >= 0 && PyArray_DIM(a, 0) != rows) {
+        PyErr_Format(PyExc_ValueError, "%s must have %zd rows, got %zd", name, rows, (Py_ssize_t)PyArray_DIM(a, 0));
+        return NULL;
+    }
+    return obj;
+}
+
 PyObject *ps_hit_geometry(PyObject *module, PyObject *args)
 {
     (void)module;
@@ -84,7 +103,7 @@ PyObject *ps_hit_geometry(PyObject *module, PyObject *args)
             break;
         }
         for (int c = 0; c < 3; ++c) {
-            out_p[c * n + i] = (t[c * count + k] + t[(3 + c) * count + k] * u[i]) + t[(6 + c) * count + k] * v[i];
+            out_p[c * n + i] = ps_triangle_coordinate(t, count, (Py_ssize_t)k, c, u[i], v[i]);
             out_n[c * n + i] = t[(9 + c) * count + k];
         }
         out_eps[i] = t[12 * count + k];

@@ -71,6 +71,14 @@ static PyMethodDef module_methods[] = {
      "primary_settle(proposal, current, stamp, flat, accept, accepted)\n--\n\nEnd a proposal: the chains that "
      "accept take its numbers at flat, and they are forgotten; with current None (fresh states) they are only "
      "forgotten (see ext/primary.c)."},
+    {"area_light_sample", ps_area_light_sample, METH_VARARGS,
+     "area_light_sample(table, area, two_sided, cdf, pmf, u, receivers)\n--\n\n(entity, point, normal, wi, "
+     "distance, facing, pdf, epsilon): a light sample per receiver ((3, N) float32) on area lights, the emitting "
+     "triangle chosen from cdf by u[0], a point uniform in its area by u[1:3] (see ext/lights.c)."},
+    {"moments_add", ps_moments_add, METH_VARARGS,
+     "moments_add(count, exponent, scaled_mean, scaled_m2, start, values)\n--\n\n(n,) float64, each column's "
+     "largest |value|: one sample (values (C, n)) added to the moments of pixels start .. start + n - 1, columns "
+     "with a NaN or Inf left out (see ext/film.c and pathspace.film.Moments)."},
     {"default_thread_count", default_thread_count, METH_NOARGS,
      "default_thread_count()\n--\n\nNumber of cores this process may run on."},
     {NULL, NULL, 0, NULL},

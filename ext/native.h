@@ -34,6 +34,19 @@ PyObject *ps_hit_geometry(PyObject *module, PyObject *args);
  * `name` (geometry.c). */
 PyObject *ps_checked_array(PyObject *obj, const char *name, int type, int other, const char *type_name, int ndim);
 
+/* obj (borrowed) if it is a 2D NumPy array of type `type` with `rows` rows, native byte order and aligned, whose
+ * rows are contiguous (any stride between them: a range of columns of a wider array); else NULL with a
+ * TypeError or ValueError naming `name` (geometry.c). */
+PyObject *ps_rows_array(PyObject *obj, const char *name, int type, const char *type_name, Py_ssize_t rows);
+
+/* Coordinate c of the point p0 + b1 e1 + b2 e2 on triangle k of a mesh table (rows p0, e1, e2, ... of `count`
+ * columns, float32), in the operations of the NumPy expression (p0 + e1 b1) + e2 b2. */
+static inline float ps_triangle_coordinate(const float *table, Py_ssize_t count, Py_ssize_t k, int c, float b1,
+                                           float b2)
+{
+    return (table[c * count + k] + table[(3 + c) * count + k] * b1) + table[(6 + c) * count + k] * b2;
+}
+
 /* Segment directions and geometric factors of explicit paths (paths.c). */
 PyObject *ps_path_geometry(PyObject *module, PyObject *args);
 /* Densities of regenerating a run of a path's vertices, summed over the splits between its two walks (paths.c). */
@@ -42,6 +55,12 @@ PyObject *ps_split_densities(PyObject *module, PyObject *args);
 /* Primary sample space of Metropolis chains: a proposal's numbers fetched, a proposal settled (primary.c). */
 PyObject *ps_primary_fetch(PyObject *module, PyObject *args);
 PyObject *ps_primary_settle(PyObject *module, PyObject *args);
+
+/* Light samples on area lights, selected from a CDF, by area (lights.c). */
+PyObject *ps_area_light_sample(PyObject *module, PyObject *args);
+
+/* One sample added to a run of pixels' film moments (film.c). */
+PyObject *ps_moments_add(PyObject *module, PyObject *args);
 
 /* Shadow rays between surface points, returned (shadow.c; Accel.occluded_between traces them). */
 PyObject *ps_shadow_rays(PyObject *module, PyObject *args, PyObject *kwargs);

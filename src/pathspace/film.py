@@ -76,6 +76,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ._native import moments_add
+
 __all__ = ["Film", "Moments"]
 
 # A pixel that has received only zeros (or nothing) keeps its moments in units of 2**SCALE_FLOOR, the
@@ -115,17 +117,12 @@ class Moments:
     def add(self, start: int, values: np.ndarray) -> np.ndarray:
         """Add one sample to each of the pixels start .. start + n - 1 (``values`` (C, n)); a column with a
         NaN or Inf is left out (its pixel's count does not grow).  Returns each column's largest |value|
-        (not finite for the columns left out)."""
-        stop = start + values.shape[1]
-        peak = np.abs(values).max(axis=0)
-        finite = np.isfinite(peak)
-        if finite.all():
-            count, clean = 1, peak
-        else:  # columns left out count no sample, and zeros in them change nothing else
-            count, clean, values = finite, np.where(finite, peak, 0.0), np.where(finite, values, 0.0)
-        exponent = self._raise_exponent(start, stop, _exponents(clean))
-        self._combine(start, stop, count, values * np.ldexp(1.0, -exponent), None)
-        return peak
+        (not finite for the columns left out).  One pass in C with the GIL released (ext/film.c; the NumPy
+        reference, :meth:`_raise_exponent` and :meth:`_combine` with one sample, is kept in the tests)."""
+        values = np.asarray(values, dtype=np.float64)
+        if values.ndim == 2 and values.shape[1] > 1 and values.strides[1] != values.itemsize:
+            values = np.ascontiguousarray(values)   # the kernel reads rows of any stride, columns contiguous
+        return moments_add(self.count, self.exponent, self.scaled_mean, self.scaled_m2, start, values)
 
     def merge(self, other: "Moments") -> None:
         """Combine with another accumulator of the same pixels (Chan, Golub & LeVeque's pairwise update)."""

@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .. import warp
+from .. import _native, warp
 from ..spectra import Colour, ColourTable, check_emission
 from ..vecmath import dot
 from ..warp import square_to_uniform_triangle
@@ -86,6 +86,17 @@ class AreaLight(Light):
         facing = tables.two_sided.take(idx) | (cos_light > 0)
         return LightSample(wi, distance, point, normal, tables.radiance_of(idx, colours), facing, pdf,
                            np.zeros(pdf.shape, dtype=bool), tables.table[12].take(idx))
+
+    @staticmethod
+    def sample_li_selected(tables: "AreaTables", cdf: np.ndarray, pmf: np.ndarray, receivers: np.ndarray,
+                           u: np.ndarray, colours) -> LightSample:
+        """:meth:`sample_li` by area on emitting triangles chosen from ``cdf`` by ``u[0]`` (``pmf`` their
+        probabilities; the density includes it), for receivers (3, N) float32, in one C pass
+        (``ext/lights.c``)."""
+        entity, point, normal, wi, distance, facing, pdf, epsilon = _native.area_light_sample(
+            tables.table, tables.area, tables.two_sided, cdf, pmf, u[:3], receivers)
+        return LightSample(wi, distance, point, normal, tables.radiance_of(entity, colours), facing, pdf,
+                           np.zeros(pdf.shape, dtype=bool), epsilon, entity)
 
     @staticmethod
     def pdf_li(tables: "AreaTables", idx, receivers, points, measure: str) -> np.ndarray:
