@@ -12,7 +12,9 @@
  *     eq. 1.5) with n_b = 1: delta = x 2^-e - mean, mean += delta / n, M2 += delta (delta n_a / n), or
  *     M2_cd += delta_c (delta_d n_a / n) for covariance moments.
  * Every value is computed in the operations and order of the NumPy expressions of the reference
- * (tests/test_film_kernel.py keeps them), so the moments are bit for bit the same.
+ * (tests/test_film_kernel.py keeps them), so the moments are bit for bit the same.  The samples must not
+ * overlap the moments' arrays (pixel i's update may change what a later column reads; the film's samples
+ * are buffers of their own).
  */
 #include "native.h"
 
@@ -99,8 +101,8 @@ PyObject *ps_moments_add(PyObject *module, PyObject *args)
         return NULL;
     }
     if (start < 0 || start > pixels - n) {
-        PyErr_Format(PyExc_ValueError, "moments_add: pixels %zd .. %zd are outside the film's %zd", start,
-                     start + (Py_ssize_t)n - 1, (Py_ssize_t)pixels);
+        PyErr_Format(PyExc_ValueError, "moments_add: %zd pixels from %zd are outside the film's %zd",
+                     (Py_ssize_t)n, start, (Py_ssize_t)pixels);
         return NULL;
     }
     PyArrayObject *peaks = (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_DOUBLE);

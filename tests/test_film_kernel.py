@@ -2,7 +2,7 @@
 
 ``Moments.add`` adds one sample to each of a run of pixels with ``_native.moments_add``; here the former
 NumPy code (``reference_add``) is the reference, bit for bit, on samples over 600 decades (subnormal to
-1e300, so that exponents grow and stored moments are rescaled), zeros, columns with NaN or Inf, films of 1,
+the largest float, so that exponents grow and stored moments are rescaled), zeros, columns with NaN or Inf, films of 1,
 3 and 5 channels with and without covariance, runs of pixels inside the film and samples that are a column
 range of a wider array; then the kernel's refusals.
 """
@@ -30,10 +30,15 @@ def reference_add(moments: Moments, start: int, values: np.ndarray) -> np.ndarra
 
 
 def samples(rng: np.random.Generator, channels: int, n: int, bad: bool) -> np.ndarray:
-    """Samples of random sign and magnitude 1e-320 .. 1e300 (a column shares its decade, as pixels do),
-    some zero, some (``bad``) NaN or +-Inf in one channel or all."""
-    decade = rng.uniform(-320, 300, n)
-    values = rng.choice([-1.0, 1.0], (channels, n)) * 10.0 ** (decade + rng.uniform(-2, 2, (channels, n)))
+    """Samples of random sign and magnitude 1e-320 .. 1e306 (a column shares its decade, as pixels do), some
+    at 2^1023 or the largest float (exponents whose inverse power of two is subnormal), some zero, some
+    (``bad``) NaN or +-Inf in one channel or all."""
+    decade = rng.uniform(-320, 304, n)
+    with np.errstate(over="ignore"):
+        values = rng.choice([-1.0, 1.0], (channels, n)) * 10.0 ** (decade + rng.uniform(-2, 2, (channels, n)))
+    values[np.isinf(values)] = np.finfo(float).max
+    values[rng.random((channels, n)) < 0.01] = 2.0 ** 1023
+    values[rng.random((channels, n)) < 0.01] = -np.finfo(float).max
     values[:, rng.random(n) < 0.1] = 0.0
     values[rng.random((channels, n)) < 0.05] = 0.0
     if bad:
@@ -105,6 +110,16 @@ def state(channels: int = 3, pixels: int = 10, covariance: bool = False):
     (lambda a, v: (a, v[:2]), ValueError, "must agree"),
     (lambda a, v: (a[:3] + [np.zeros((3, 10))[:, :9].copy()], v), ValueError, "must agree"),
     (lambda a, v: (a[:3] + [np.zeros((3, 2, 10))], v), ValueError, "must agree"),
+    (lambda a, v: (a[:3] + [np.zeros((2, 10))], v), ValueError, "must agree"),
+    (lambda a, v: (a[:1] + [a[1][:9].copy()] + a[2:], v), ValueError, "must agree"),
+    (lambda a, v: (a[:2] + [np.zeros((3, 9))] + a[3:], v), ValueError, "must agree"),
+    (lambda a, v: ([a[0][:0].copy(), a[1][:0].copy(), np.zeros((0, 0)), np.zeros((0, 0))], np.zeros((0, 0))),
+     ValueError, "must agree"),
+    (lambda a, v: (a, v.astype(v.dtype.newbyteorder())), TypeError, "values"),
+    (lambda a, v: (a, np.frombuffer(np.zeros(97, np.uint8).data, np.float64, 12, 1).reshape(3, 4)), ValueError,
+     "values must be aligned"),
+    (lambda a, v: (a, np.lib.stride_tricks.as_strided(np.zeros(8), (3, 1), (12, 8))), ValueError,
+     "values must be aligned"),
 ])
 def test_moments_add_refuses_bad_arguments(change, error, match):
     arrays, values = change(state(), np.ones((3, 4)))
@@ -116,6 +131,25 @@ def test_moments_add_refuses_bad_arguments(change, error, match):
 def test_moments_add_refuses_pixels_outside_the_film(start):
     with pytest.raises(ValueError, match="outside the film"):
         _native.moments_add(*state(), start, np.ones((3, 4)))
+
+
+def test_film_takes_samples_of_any_layout():
+    """Transposed, misaligned and float32 samples reach the kernel as copies: the moments are those of the
+    same samples as a float64 C array."""
+    rng = np.random.default_rng(9)
+    image = rng.random((600, 3))
+    buffer = np.zeros(image.size * 8 + 1, np.uint8)
+    misaligned = np.frombuffer(buffer.data, np.float64, image.size, 1).reshape(3, 600)
+    misaligned[...] = image.T
+    films = [Film(30, 20, 3) for _ in range(4)]
+    for film, values in zip(films, (np.ascontiguousarray(image.T), image.T, misaligned, image.T)):
+        film.add_samples(0, 0, values)
+    films[3].add_samples(1, 0, image.T.astype(np.float32))
+    films[0].add_samples(1, 0, image.T.astype(np.float32).astype(np.float64))
+    for film in films[1:3]:
+        film.add_samples(1, 0, image.T.astype(np.float32).astype(np.float64))
+    for film in films[1:]:
+        assert_same(film.moments, films[0].moments)
 
 
 def test_moments_add_refuses_read_only_state():

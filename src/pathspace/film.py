@@ -120,8 +120,8 @@ class Moments:
         (not finite for the columns left out).  One pass in C with the GIL released (ext/film.c; the NumPy
         reference, :meth:`_raise_exponent` and :meth:`_combine` with one sample, is kept in the tests)."""
         values = np.asarray(values, dtype=np.float64)
-        if values.ndim == 2 and values.shape[1] > 1 and values.strides[1] != values.itemsize:
-            values = np.ascontiguousarray(values)   # the kernel reads rows of any stride, columns contiguous
+        if not values.flags.aligned or (values.ndim == 2 and values.shape[1] > 1 and values.strides[1] != 8):
+            values = np.array(values, order="C")   # the kernel reads aligned rows of any stride, columns contiguous
         return moments_add(self.count, self.exponent, self.scaled_mean, self.scaled_m2, start, values)
 
     def merge(self, other: "Moments") -> None:

@@ -12,9 +12,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+import pathspace as ps
 from pathspace import _native
 from pathspace.lights import AreaLight, LightSample
 from pathspace.spectra import RGBColours
+from conftest import cornell_dict
 from lights.test_light_set import two_light_scene
 
 
@@ -51,9 +53,21 @@ def uniforms(lights, selection: str, rng: np.random.Generator, n: int) -> np.nda
     return u
 
 
+def tilted_lamp_scene():
+    """The Cornell box's lamp and a second one tilted on every axis (a normal with three non-zero components)."""
+    data = cornell_dict((8, 8))
+    data["shapes"][0]["emitter"] = {"radiance": [1.0] * 3}
+    data["shapes"].append({"name": "lamp3", "type": "quad", "corner": [0.2, -0.3, 0.1], "edge_u": [0.3, 0.1, -0.05],
+                           "edge_v": [-0.07, 0.2, 0.15], "material": "white",
+                           "emitter": {"radiance": [3.0, 2.0, 1.0], "two_sided": True}})
+    data["render"] = {"origin": [0.0, 0.0, 0.0]}
+    return ps.scene_from_dict(data)
+
+
+@pytest.mark.parametrize("tilted", [False, True])
 @pytest.mark.parametrize("selection", ["power", "uniform"])
-def test_area_light_sample_equals_the_numpy_reference(selection):
-    lights = two_light_scene().lights
+def test_area_light_sample_equals_the_numpy_reference(selection, tilted):
+    lights = (tilted_lamp_scene() if tilted else two_light_scene()).lights
     assert lights.models == [AreaLight]
     rng = np.random.default_rng(11)
     receivers = receivers_around(lights, rng, 20000)
@@ -80,6 +94,37 @@ def test_area_light_sample_reads_rows_of_wider_arrays():
     np.testing.assert_array_equal(got.point, expected.point)
 
 
+def test_sample_li_runs_the_kernel_where_it_applies(monkeypatch):
+    """Area lights by area with float32 receivers and float64 uniforms go through the kernel; the
+    solid-angle measure, float64 receivers and float32 uniforms through the NumPy code."""
+    calls = []
+    kernel = _native.area_light_sample
+    monkeypatch.setattr(_native, "area_light_sample", lambda *args: calls.append(1) or kernel(*args))
+    lights = two_light_scene().lights
+    rng = np.random.default_rng(2)
+    receivers, u = receivers_around(lights, rng, 50), rng.random((3, 50))
+    lights.sample_li(receivers, u, RGBColours)
+    assert len(calls) == 1
+    lights.sample_li(receivers, u, RGBColours, measure="solid_angle")
+    lights.sample_li(receivers.astype(np.float64), u, RGBColours)
+    lights.sample_li(receivers, u.astype(np.float32), RGBColours)
+    assert len(calls) == 1
+
+
+def test_sample_li_takes_receivers_and_uniforms_of_any_layout():
+    """Broadcast and transposed receivers, transposed uniforms: copied for the kernel, same samples."""
+    lights = two_light_scene().lights
+    rng = np.random.default_rng(4)
+    point = np.float32([0.1, 0.5, -0.2])
+    u = rng.random((3, 40))
+    expected = reference_sample(lights, np.repeat(point[:, None], 40, axis=1), u, "power")
+    for receivers, uniforms in ((np.broadcast_to(point[:, None], (3, 40)), u),
+                                (np.ascontiguousarray(np.repeat(point[:, None], 40, axis=1).T).T, u.T.copy().T)):
+        got = lights.sample_li(receivers, uniforms, RGBColours)
+        np.testing.assert_array_equal(got.pdf, expected.pdf)
+        np.testing.assert_array_equal(got.wi, expected.wi)
+
+
 def arguments():
     area = two_light_scene().lights.area
     cdf = np.cumsum(area.area) / area.area.sum()
@@ -96,6 +141,12 @@ def arguments():
     (5, lambda a: np.asfortranarray(a), ValueError, "contiguous rows"),
     (6, lambda a: a.astype(np.float64), TypeError, "receivers"),
     (6, lambda a: a[:, :3], ValueError, "as many columns"),
+    (0, lambda a: a[:, :0], ValueError, "must agree"),
+    (2, lambda a: a[:-1], ValueError, "must agree"),
+    (3, lambda a: a[:-1], ValueError, "must agree"),
+    (4, lambda a: a[:-1], ValueError, "must agree"),
+    (5, lambda a: a.astype(a.dtype.newbyteorder()), TypeError, "u must be a 2D float64"),
+    (5, lambda a: np.lib.stride_tricks.as_strided(np.zeros(16), (3, 4), (12, 8)), ValueError, "u must be aligned"),
 ])
 def test_area_light_sample_refuses_bad_arguments(position, value, error, match):
     args = arguments()

@@ -208,7 +208,7 @@ class LightSet:
         point on it by ``measure``; the density includes the pmf.  Where every light is an area light and
         points are sampled by area (the default), both steps are one C pass (``ext/lights.c``, bit for bit
         the NumPy code of the other cases, :meth:`AreaTables.sample`)."""
-        if self.models == [AreaLight] and measure == "area" and receivers.dtype == np.float32:
+        if self.models == [AreaLight] and measure == "area" and receivers.dtype == np.float32 and u.dtype == np.float64:
             return AreaLight.sample_li_selected(self.area, self._cdfs[selection], self.pmf(selection), receivers,
                                                 u, colours)
         entity = self.select(u[0], selection)

@@ -91,10 +91,11 @@ class AreaLight(Light):
     def sample_li_selected(tables: "AreaTables", cdf: np.ndarray, pmf: np.ndarray, receivers: np.ndarray,
                            u: np.ndarray, colours) -> LightSample:
         """:meth:`sample_li` by area on emitting triangles chosen from ``cdf`` by ``u[0]`` (``pmf`` their
-        probabilities; the density includes it), for receivers (3, N) float32, in one C pass
-        (``ext/lights.c``)."""
+        probabilities; the density includes it), for receivers (3, N) float32 and uniforms u (3, N) float64,
+        in one C pass (``ext/lights.c``)."""
         entity, point, normal, wi, distance, facing, pdf, epsilon = _native.area_light_sample(
-            tables.table, tables.area, tables.two_sided, cdf, pmf, u[:3], receivers)
+            tables.table, tables.area, tables.two_sided, cdf, pmf, np.ascontiguousarray(u[:3]),
+            np.ascontiguousarray(receivers))
         return LightSample(wi, distance, point, normal, tables.radiance_of(entity, colours), facing, pdf,
                            np.zeros(pdf.shape, dtype=bool), epsilon, entity)
 

@@ -14,7 +14,7 @@ import numpy as np
 
 from .. import warp
 from ..checks import triple
-from ..spectra import Colour, ColourTable, check_emission, mean_rgb
+from ..spectra import Colour, ColourTable, check_emission
 from ..vecmath import dot
 from .base import EmissionSample, Light, LightContext, LightSample
 
