@@ -75,6 +75,10 @@ static PyMethodDef module_methods[] = {
      "area_light_sample(table, area, two_sided, cdf, pmf, u, receivers)\n--\n\n(entity, point, normal, wi, "
      "distance, facing, pdf, epsilon): a light sample per receiver ((3, N) float32) on area lights, the emitting "
      "triangle chosen from cdf by u[0], a point uniform in its area by u[1:3] (see ext/lights.c)."},
+    {"pinhole_connect", ps_pinhole_connect, METH_VARARGS,
+     "pinhole_connect(receivers, position, forward, right, image_up, tan_x, tan_y, width, height, lens_area)\n--\n\n"
+     "(wi (3, N), pdf (N,), raster (2, N), on_film (N,), cos (N,)): receivers ((3, N) float32 or float64) joined "
+     "to a pinhole camera (see ext/camera.c)."},
     {"moments_add", ps_moments_add, METH_VARARGS,
      "moments_add(count, exponent, scaled_mean, scaled_m2, start, values)\n--\n\n(n,) float64, each column's "
      "largest |value|: one sample (values (C, n)) added to the moments of pixels start .. start + n - 1, columns "

@@ -59,6 +59,9 @@ PyObject *ps_primary_settle(PyObject *module, PyObject *args);
 /* Light samples on area lights, selected from a CDF, by area (lights.c). */
 PyObject *ps_area_light_sample(PyObject *module, PyObject *args);
 
+/* Receivers joined to a pinhole camera: direction, density, raster position, cosine (camera.c). */
+PyObject *ps_pinhole_connect(PyObject *module, PyObject *args);
+
 /* One sample added to a run of pixels' film moments (film.c). */
 PyObject *ps_moments_add(PyObject *module, PyObject *args);
 

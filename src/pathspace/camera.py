@@ -24,6 +24,7 @@ from __future__ import annotations
 import copy
 import numpy as np
 
+from . import _native
 from .checks import triple
 from .fields import MAX_COORDINATE, Fields
 from .vecmath import dot
@@ -213,18 +214,17 @@ class PinholeCamera:
         of that lens point in solid angle at the receiver, d^2 / (|cos| lens_area)
         (for a pinhole, whose "lens area" is 1, this is a delta's conversion
         factor, as in pbrt), lens points (3, N), raster positions (2, N), valid (N,)).
+        The geometry is one C pass (``ext/camera.c``), bit for bit the thin lens's NumPy code with the lens
+        point at the pinhole.
         """
-        lens = self.sample_lens(u)
-        to_lens = lens - receivers.astype(np.float64)
-        dist2 = dot(to_lens, to_lens)
-        dist = np.sqrt(dist2)
-        wi = to_lens / dist
-        raster, on_film = self.raster(receivers, lens)
-        cos = self.cos_to_axis(-wi)
+        receivers = np.asarray(receivers)
+        if receivers.dtype not in (np.float32, np.float64):
+            receivers = receivers.astype(np.float64)
+        wi, pdf, raster, on_film, cos = _native.pinhole_connect(
+            np.ascontiguousarray(receivers), self.position, self.forward, self.right, self.image_up,
+            self.tan_half[0], self.tan_half[1], self.width, self.height, self.lens_area)
         we = self._importance(cos, on_film)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            pdf = dist2 / (np.abs(cos) * self.lens_area)
-        return wi, we, pdf, lens, raster, on_film & (we > 0)
+        return wi, we, pdf, self.sample_lens(u), raster, on_film & (we > 0)
 
 
 class ThinLensCamera(PinholeCamera):
@@ -296,6 +296,21 @@ class ThinLensCamera(PinholeCamera):
         directions = focus - origins
         directions /= np.sqrt(dot(directions, directions))
         return origins.astype(np.float32), directions.astype(np.float32)
+
+    def sample_importance(self, receivers: np.ndarray, u: np.ndarray):
+        """Connect receivers (3, N) to a point on the lens drawn from ``u`` (2, N); returns what
+        :meth:`PinholeCamera.sample_importance` does."""
+        lens = self.sample_lens(u)
+        to_lens = lens - receivers.astype(np.float64)
+        dist2 = dot(to_lens, to_lens)
+        dist = np.sqrt(dist2)
+        wi = to_lens / dist
+        raster, on_film = self.raster(receivers, lens)
+        cos = self.cos_to_axis(-wi)
+        we = self._importance(cos, on_film)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            pdf = dist2 / (np.abs(cos) * self.lens_area)
+        return wi, we, pdf, lens, raster, on_film & (we > 0)
 
     def raster(self, points: np.ndarray, lens_points: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Raster position of the film point whose rays through ``lens_points`` reach ``points``."""
