@@ -59,26 +59,23 @@ PyObject *ps_pinhole_connect(PyObject *module, PyObject *args)
         vector3(objs[4], "image_up", u))
         return NULL;
     npy_intp n = PyArray_DIM(receivers, 1), dims_w[2] = {3, n}, dims_r[2] = {2, n};
-    PyArrayObject *out[5] = {
-        (PyArrayObject *)PyArray_SimpleNew(2, dims_w, NPY_DOUBLE), /* w */
-        (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_DOUBLE),     /* pdf */
-        (PyArrayObject *)PyArray_SimpleNew(2, dims_r, NPY_DOUBLE), /* raster */
-        (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_BOOL),       /* on the film */
-        (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_DOUBLE),     /* cos */
+    PyObject *out[5] = {
+        PyArray_SimpleNew(2, dims_w, NPY_DOUBLE), /* w */
+        PyArray_SimpleNew(1, &n, NPY_DOUBLE),     /* pdf */
+        PyArray_SimpleNew(2, dims_r, NPY_DOUBLE), /* raster */
+        PyArray_SimpleNew(1, &n, NPY_BOOL),       /* on the film */
+        PyArray_SimpleNew(1, &n, NPY_DOUBLE),     /* cos */
     };
-    for (int k = 0; k < 5; ++k) {
-        if (!out[k]) {
-            for (int j = 0; j < 5; ++j)
-                Py_XDECREF(out[j]);
-            return NULL;
-        }
-    }
+    if (!ps_outputs_allocated(out, 5))
+        return NULL;
     int wide = PyArray_TYPE(receivers) == NPY_DOUBLE;
     const float *x32 = (const float *)PyArray_DATA(receivers);
     const double *x64 = (const double *)PyArray_DATA(receivers);
-    double *w = (double *)PyArray_DATA(out[0]), *pdf = (double *)PyArray_DATA(out[1]);
-    double *raster = (double *)PyArray_DATA(out[2]), *cosine = (double *)PyArray_DATA(out[4]);
-    npy_bool *inside = (npy_bool *)PyArray_DATA(out[3]);
+    double *w = (double *)PyArray_DATA((PyArrayObject *)out[0]);
+    double *pdf = (double *)PyArray_DATA((PyArrayObject *)out[1]);
+    double *raster = (double *)PyArray_DATA((PyArrayObject *)out[2]);
+    npy_bool *inside = (npy_bool *)PyArray_DATA((PyArrayObject *)out[3]);
+    double *cosine = (double *)PyArray_DATA((PyArrayObject *)out[4]);
     double film_w = (double)width, film_h = (double)height;
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp i = 0; i < n; ++i) {

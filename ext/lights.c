@@ -72,35 +72,32 @@ PyObject *ps_area_light_sample(PyObject *module, PyObject *args)
         return NULL;
     }
     npy_intp dims[2] = {3, n};
-    PyArrayObject *out[8] = {
-        (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_INT64),   /* entity */
-        (PyArrayObject *)PyArray_SimpleNew(2, dims, NPY_FLOAT), /* point */
-        (PyArrayObject *)PyArray_SimpleNew(2, dims, NPY_FLOAT), /* normal */
-        (PyArrayObject *)PyArray_SimpleNew(2, dims, NPY_FLOAT), /* wi */
-        (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_FLOAT),   /* distance */
-        (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_BOOL),    /* facing */
-        (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_DOUBLE),  /* pdf */
-        (PyArrayObject *)PyArray_SimpleNew(1, &n, NPY_FLOAT),   /* epsilon */
+    PyObject *out[8] = {
+        PyArray_SimpleNew(1, &n, NPY_INT64),   /* entity */
+        PyArray_SimpleNew(2, dims, NPY_FLOAT), /* point */
+        PyArray_SimpleNew(2, dims, NPY_FLOAT), /* normal */
+        PyArray_SimpleNew(2, dims, NPY_FLOAT), /* wi */
+        PyArray_SimpleNew(1, &n, NPY_FLOAT),   /* distance */
+        PyArray_SimpleNew(1, &n, NPY_BOOL),    /* facing */
+        PyArray_SimpleNew(1, &n, NPY_DOUBLE),  /* pdf */
+        PyArray_SimpleNew(1, &n, NPY_FLOAT),   /* epsilon */
     };
-    for (int k = 0; k < 8; ++k) {
-        if (!out[k]) {
-            for (int j = 0; j < 8; ++j)
-                Py_XDECREF(out[j]);
-            return NULL;
-        }
-    }
+    if (!ps_outputs_allocated(out, 8))
+        return NULL;
     const float *t = (const float *)PyArray_DATA(table), *x = (const float *)PyArray_DATA(receivers);
     const double *a = (const double *)PyArray_DATA(area), *c = (const double *)PyArray_DATA(cdf),
                  *p = (const double *)PyArray_DATA(pmf), *uu = (const double *)PyArray_DATA(u);
     const npy_bool *two = (const npy_bool *)PyArray_DATA(two_sided);
     npy_intp u_row = PyArray_STRIDE(u, 0) / (npy_intp)sizeof(double);
     npy_intp x_row = PyArray_STRIDE(receivers, 0) / (npy_intp)sizeof(float);
-    int64_t *entity = (int64_t *)PyArray_DATA(out[0]);
-    float *point = (float *)PyArray_DATA(out[1]), *normal = (float *)PyArray_DATA(out[2]);
-    float *wi = (float *)PyArray_DATA(out[3]), *distance = (float *)PyArray_DATA(out[4]);
-    npy_bool *facing = (npy_bool *)PyArray_DATA(out[5]);
-    double *pdf = (double *)PyArray_DATA(out[6]);
-    float *epsilon = (float *)PyArray_DATA(out[7]);
+    int64_t *entity = (int64_t *)PyArray_DATA((PyArrayObject *)out[0]);
+    float *point = (float *)PyArray_DATA((PyArrayObject *)out[1]);
+    float *normal = (float *)PyArray_DATA((PyArrayObject *)out[2]);
+    float *wi = (float *)PyArray_DATA((PyArrayObject *)out[3]);
+    float *distance = (float *)PyArray_DATA((PyArrayObject *)out[4]);
+    npy_bool *facing = (npy_bool *)PyArray_DATA((PyArrayObject *)out[5]);
+    double *pdf = (double *)PyArray_DATA((PyArrayObject *)out[6]);
+    float *epsilon = (float *)PyArray_DATA((PyArrayObject *)out[7]);
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp i = 0; i < n; ++i) {
         npy_intp j = entries_at_most(c, lights, uu[i]);

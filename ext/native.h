@@ -39,6 +39,19 @@ PyObject *ps_checked_array(PyObject *obj, const char *name, int type, int other,
  * TypeError or ValueError naming `name` (geometry.c). */
 PyObject *ps_rows_array(PyObject *obj, const char *name, int type, const char *type_name, Py_ssize_t rows);
 
+/* 1 if every one of `count` newly allocated outputs exists; else releases them all and returns 0 (the failed
+ * allocation has set the exception). */
+static inline int ps_outputs_allocated(PyObject **out, int count)
+{
+    for (int k = 0; k < count; ++k)
+        if (!out[k]) {
+            for (int j = 0; j < count; ++j)
+                Py_XDECREF(out[j]);
+            return 0;
+        }
+    return 1;
+}
+
 /* Coordinate c of the point p0 + b1 e1 + b2 e2 on triangle k of a mesh table (rows p0, e1, e2, ... of `count`
  * columns, float32), in the operations of the NumPy expression (p0 + e1 b1) + e2 b2. */
 static inline float ps_triangle_coordinate(const float *table, Py_ssize_t count, Py_ssize_t k, int c, float b1,
