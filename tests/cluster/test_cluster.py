@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import pathspace as ps
-from pathspace.cluster import scene_loads, start_client
+from pathspace.cluster import ScenePayload, scene_loads, scenes, start_client
 from pathspace.experiment import converge, sweep
 from pathspace.film import Film
 from conftest import scene_dict
@@ -86,28 +86,37 @@ def test_one_task_of_all_passes_is_bit_for_bit_the_single_process_render(workers
     assert np.array_equal(single.image, on_cluster.image) and np.array_equal(single.variance, on_cluster.variance)
 
 
-def test_a_worker_killed_mid_render_loses_no_sample(workers):
-    """SIGKILL a worker while it executes a task of the render: that task cannot have delivered its film,
-    so the render completes only if Dask ran it again elsewhere; each task's film is merged once, and the
-    image equals the single-process render."""
-    scene = box((64, 64))
-    kill = {}
+def kill_when_executing(client, prefix: str, kill: dict, victim: str | None = None) -> threading.Thread:
+    """A thread that SIGKILLs a worker as soon as a task whose key starts with ``prefix`` runs: worker
+    ``victim``, or (None) the one running it; it records the worker and the time in ``kill`` and gives up
+    when ``kill`` gets "done"."""
 
     def executing(dask_worker):
         return os.getpid(), [str(ts.key) for ts in dask_worker.state.executing]
 
     def killer():
         while "done" not in kill:
-            for address, (pid, keys) in workers.run(executing).items():
-                running = [key for key in keys if key.startswith("pathspace-passes")]
-                if running:
-                    os.kill(pid, signal.SIGKILL)
-                    kill.update(victim=address, task=running[0], at=time.perf_counter())
-                    return
+            running = client.run(executing)
+            busy = [address for address, (_, keys) in running.items() if any(k.startswith(prefix) for k in keys)]
+            if busy:
+                target = victim or busy[0]
+                os.kill(running[target][0], signal.SIGKILL)
+                kill.update(victim=target, at=time.perf_counter())
+                return
             time.sleep(0.01)
 
     thread = threading.Thread(target=killer, daemon=True)
     thread.start()
+    return thread
+
+
+def test_a_worker_killed_mid_render_loses_no_sample(workers):
+    """SIGKILL a worker while it executes a task of the render: that task cannot have delivered its film,
+    so the render completes only if Dask ran it again elsewhere; each task's film is merged once, and the
+    image equals the single-process render."""
+    scene = box((64, 64))
+    kill = {}
+    thread = kill_when_executing(workers, "pathspace-passes", kill)
     result = ps.render(scene, "bdpt", spp=24, seed=9, client=workers, task_passes=2)
     finished = time.perf_counter()
     kill["done"] = True
@@ -116,6 +125,75 @@ def test_a_worker_killed_mid_render_loses_no_sample(workers):
     assert result.stats["spp"] == 24 and result.stats["cluster"]["tasks"] == 12
     single = ps.render(scene, "bdpt", spp=24, seed=9)
     assert_same_to_rounding(single.film, result.film)
+
+
+def lose_first_shipment(monkeypatch, client) -> list:
+    """Make the cluster lose the first value a render or sweep ships: it goes to one worker alone (as if Dask's
+    active memory manager had dropped the other copies), which is SIGKILLed before any task runs (its nanny
+    starts a new one).  Returns the list of the values shipped."""
+    shipped = []
+
+    def getpid():
+        return os.getpid()
+
+    def ship(client, value):
+        shipped.append(value)
+        if len(shipped) > 1:
+            return original(client, value)
+        victim = sorted(client.nthreads())[0]
+        future = client.scatter([value], workers=[victim], broadcast=False, hash=False)[0]
+        os.kill(client.run(getpid)[victim], signal.SIGKILL)
+        deadline = time.perf_counter() + 60
+        while future.status != "cancelled" and time.perf_counter() < deadline:
+            time.sleep(0.01)
+        assert future.status == "cancelled"
+        return future
+
+    original = scenes.ship
+    monkeypatch.setattr(scenes, "ship", ship)
+    return shipped
+
+
+def payloads(shipped: list) -> int:
+    """How many of the values ``shipped`` were scenes."""
+    return sum(isinstance(value, ScenePayload) for value in shipped)
+
+
+def test_a_render_whose_scene_the_cluster_lost_ships_it_again(workers, monkeypatch):
+    """Scattered data is not computed again: when every worker holding the scene has died, Dask forgets it
+    and cancels the tasks that need it ("lost dependencies").  The render ships the scene again, once, and
+    runs those tasks again: the image equals the single-process render."""
+    scene = box((32, 32))
+    shipped = lose_first_shipment(monkeypatch, workers)
+    result = ps.render(scene, "bdpt", spp=8, seed=9, client=workers, task_passes=2)
+    assert payloads(shipped) == 2
+    assert result.stats["spp"] == 8 and result.stats["cluster"]["tasks"] == 4
+    assert_same_to_rounding(ps.render(scene, "bdpt", spp=8, seed=9).film, result.film)
+
+
+def test_a_sweep_whose_scene_the_cluster_lost_ships_it_again(workers, monkeypatch):
+    """The same for the tasks of a sweep: every cell renders, equal to the sweep in one process."""
+    scene = box((16, 16))
+    reference = ps.render(scene, "pt", spp=16, seed=1)
+    shipped = lose_first_shipment(monkeypatch, workers)
+    grid = {"rr": ["albedo", "off"]}
+    remote = sweep(scene, "pt", grid, reference, spp=4, seeds=(0, 1), client=workers, cache=False)
+    assert payloads(shipped) == 2
+    assert remote.failed.empty and len(remote.table) == 4
+    local = sweep(scene, "pt", grid, reference, spp=4, seeds=(0, 1))
+    assert np.array_equal(local.table["mean"], remote.table["mean"])
+
+
+def test_a_render_gives_up_on_a_cluster_that_keeps_losing_its_scene(workers, monkeypatch):
+    """Every shipment lost: the render stops after RESHIPS renewals with an error that says why."""
+    def lost(client, value):
+        future = client.scatter([value], hash=False)[0]
+        client.cancel([future])
+        return future
+
+    monkeypatch.setattr(scenes, "ship", lost)
+    with pytest.raises(RuntimeError, match=f"lost the data shipped to it .payload. {scenes.RESHIPS + 1} times"):
+        ps.render(box((16, 16)), "pt", spp=2, seed=1, client=workers, task_passes=1)
 
 
 def test_a_sweep_finishes_around_a_failing_cell_and_resumes_from_its_cache(workers, tmp_path):

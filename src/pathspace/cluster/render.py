@@ -13,9 +13,10 @@ number of workers.
 At most ``2 x worker threads`` tasks are outstanding (submitted and not yet merged; workers that join
 during the render widen the window), and the film of a task that finished before the ones ahead of it
 stays on its worker until its turn: the client holds its own film and one task's.  A task whose worker
-dies is run again by Dask on another worker (``distributed.scheduler.allowed-failures``, default 3),
-and each task's future is merged once, by its index.  A task that raises cancels the render and
-re-raises its error, with a note naming its passes.
+dies is run again by Dask on another worker (``distributed.scheduler.allowed-failures``, default 3);
+if the scene was lost with it, the render ships it again and submits the tasks that needed it again
+(:class:`~pathspace.cluster.scenes.Shipments`).  Each task is merged once, by its index.  A task that
+raises cancels the render and re-raises its error, with a note naming its passes.
 """
 from __future__ import annotations
 
@@ -27,7 +28,7 @@ from ..estimators.base import Counters
 from ..film import Film
 from ..progress import progress_bar
 from .client import require_distributed
-from .scenes import payload_future
+from .scenes import ScenePayload, Shipments
 from .tasks import render_passes
 
 __all__ = ["ClusterRun", "render_on_cluster", "default_task_passes", "TASKS_PER_THREAD"]
@@ -86,24 +87,28 @@ def render_on_cluster(client, scene, estimator, mode, *, spp: int, seed: int, fi
     counters, task_seconds, workers = Counters(), 0.0, set()
     bar = progress_bar(progress, spp, "spp", f"rendering on the cluster ({estimator.name})")
     clock = time.perf_counter()
-    scene_future = payload_future(client, scene)
-    index_of: dict = {}
+    shipments = Shipments(client, payload=ScenePayload.of(scene))
+    index_of: dict = {}   # task key -> (task index, submissions before, the shipments it was given)
     waiting: dict[int, object] = {}   # finished tasks waiting for the tasks before them (their films stay on workers)
     merged = submitted = peak = 0
     counted = time.perf_counter()
     done = distributed.as_completed(loop=client.loop)
+
+    def submit_task(index: int, attempt: int = 0) -> None:
+        start = starts[index]
+        count = min(task_passes, first_pass + spp - start)
+        key = f"pathspace-passes-{token}-{index}" + (f"-again-{attempt}" if attempt else "")
+        future = client.submit(render_passes, shipments.futures["payload"], estimator, seed, start, count, spectral,
+                               wavelength_sampling, key=key, pure=False)
+        index_of[key] = (index, attempt, dict(shipments.futures))
+        done.add(future)
 
     def submit() -> None:
         nonlocal submitted, threads, counted
         if time.perf_counter() - counted > WORKER_RECOUNT_SECONDS:  # workers that joined since the start count too
             threads, counted = max(threads, sum(client.nthreads().values())), time.perf_counter()
         while submitted < len(starts) and submitted - merged < 2 * threads:
-            start = starts[submitted]
-            count = min(task_passes, first_pass + spp - start)
-            future = client.submit(render_passes, scene_future, estimator, seed, start, count, spectral,
-                                   wavelength_sampling, key=f"pathspace-passes-{token}-{submitted}", pure=False)
-            index_of[future.key] = submitted
-            done.add(future)
+            submit_task(submitted)
             submitted += 1
 
     def result_of(index: int):
@@ -117,7 +122,10 @@ def render_on_cluster(client, scene, estimator, mode, *, spp: int, seed: int, fi
     try:
         submit()
         for future in done:  # each task's future once, when it has finished (after any retries)
-            index = index_of[future.key]
+            index, attempt, given = index_of.pop(future.key)
+            if future.status == "cancelled" and shipments.lost_by(given):
+                submit_task(index, attempt + 1)   # its scene was lost with a worker, and is shipped again
+                continue
             waiting[index] = future
             peak = max(peak, len(waiting))
             if future.status == "error":
@@ -137,7 +145,7 @@ def render_on_cluster(client, scene, estimator, mode, *, spp: int, seed: int, fi
         outstanding = list(done.futures)  # not finished: the render stopped early
         if outstanding:
             client.cancel(outstanding)
-        scene_future.release()
+        shipments.release()
         if bar is not None:
             bar.close()
     seconds = time.perf_counter() - clock

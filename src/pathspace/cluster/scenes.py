@@ -3,7 +3,8 @@
 A task gets a :class:`ScenePayload` (a key and the pickled scene: geometry, materials, lights and
 camera, without BVHs; see :meth:`pathspace.scene.Scene.__getstate__`) and calls :func:`scene_on_worker`,
 which returns the scene of that key from the process's cache or unpickles it there.  The payload
-is scattered to every worker once per render or sweep (:func:`payload_future`).
+is scattered to every worker once per render or sweep (:class:`Shipments`), and again if the cluster
+loses it.
 """
 from __future__ import annotations
 
@@ -13,10 +14,12 @@ import threading
 from collections import OrderedDict
 from dataclasses import dataclass
 
-__all__ = ["ScenePayload", "payload_future", "ship", "scene_on_worker", "scene_loads"]
+__all__ = ["ScenePayload", "Shipments", "ship", "scene_on_worker", "scene_loads"]
 
 # Scenes kept per worker process (the least recently used is dropped beyond this).
 KEPT_SCENES = 4
+# How many times a render or sweep ships its values again after the cluster lost them.
+RESHIPS = 3
 
 _scenes: "OrderedDict[str, object]" = OrderedDict()
 _lock = threading.Lock()
@@ -39,18 +42,52 @@ class ScenePayload:
         return cls(key, data)
 
 
-def payload_future(client, scene):
-    """A future of ``scene``'s payload on ``client``'s cluster, to pass to tasks (see :func:`ship`)."""
-    return ship(client, ScenePayload.of(scene))
-
-
 def ship(client, value):
     """A future of ``value`` copied to every worker (``scatter(broadcast=True)``), for tasks to depend on: it
     travels straight to the workers, not through the scheduler's task graph, and every worker holds it
     before any task needs it -- else Dask keeps the tasks near the one worker that holds it (measured: 5
     tasks to 3 on two workers, the second waiting 0.2 s for its copy).  A worker that joins later, or
-    restarts, fetches it from another; if every worker holding it dies at once, the tasks fail."""
+    restarts, fetches it from another; when every worker holding it has died, it is lost (see
+    :class:`Shipments`)."""
     return client.scatter([value], broadcast=True, hash=False)[0]  # in a list: lists and dicts are one value too
+
+
+class Shipments:
+    """Values copied to every worker for a render's or sweep's tasks to depend on (:attr:`futures`, by name),
+    shipped again when the cluster loses one.
+
+    Scattered data has no task that could compute it again: when every worker holding it has died, Dask
+    forgets it and cancels the tasks that need it ("already forgotten").  :func:`ship` gives every worker
+    a copy, but Dask's active memory manager drops the copies that no assigned task needs (its
+    ReduceReplicas policy, on by default), so the death of one worker can lose a value.  A caller whose
+    task comes back cancelled asks :meth:`lost_by` with the futures the task was given; if a value it
+    needed was lost, that value is shipped again and the caller submits the task again.
+    """
+
+    def __init__(self, client, **values) -> None:
+        self.client, self.values, self.renewals = client, values, 0
+        self.futures = {name: ship(client, value) for name, value in values.items()}
+
+    def lost_by(self, given: dict) -> bool:
+        """Whether a cancelled task lost a value it was ``given`` (a copy of :attr:`futures` made when it was
+        submitted): shipped again since, or lost now (then shipped again here).  Raises RuntimeError after
+        ``RESHIPS`` renewals: a cluster that keeps losing every worker cannot finish the work."""
+        renewed = any(self.futures[name] is not future for name, future in given.items())
+        lost = [name for name, future in self.futures.items() if future.status != "finished"]
+        if lost:
+            if self.renewals == RESHIPS:
+                raise RuntimeError(f"the cluster lost the data shipped to it ({', '.join(lost)}) "
+                                   f"{RESHIPS + 1} times: every worker holding it died")
+            self.renewals += 1
+            for name in lost:
+                self.futures[name].release()
+                self.futures[name] = ship(self.client, self.values[name])
+        return renewed or bool(lost)
+
+    def release(self) -> None:
+        """Let the cluster drop the values."""
+        for future in self.futures.values():
+            future.release()
 
 
 def scene_on_worker(payload: ScenePayload):

@@ -7,7 +7,7 @@ from typing import Any, Callable, Iterator
 
 from ..progress import progress_bar
 from .client import require_distributed
-from .scenes import payload_future, ship
+from .scenes import ScenePayload, Shipments
 
 __all__ = ["run_tasks"]
 
@@ -15,8 +15,8 @@ __all__ = ["run_tasks"]
 def run_tasks(client, scene, function: Callable, tasks: list[dict], *, shared: dict[str, Any] | None = None,
               progress: bool = False, unit: str = "task") -> Iterator[tuple[int, Any]]:
     """Run ``function(payload, **shared, **task)`` for every task on ``client``'s cluster (``payload``: the
-    scene's :class:`~pathspace.cluster.scenes.ScenePayload`; ``shared`` values travel once, like the scene)
-    and yield (task index, output) as they finish; a task that raised yields its exception.  Tasks still
+    scene's :class:`~pathspace.cluster.scenes.ScenePayload`; ``shared`` values travel once, like the scene,
+    and again with the tasks that need them if the cluster loses them) and yield (task index, output) as they finish; a task that raised yields its exception.  Tasks still
     running when the caller stops are cancelled."""
     distributed = require_distributed()
     if isinstance(scene, (str, os.PathLike)):
@@ -24,14 +24,25 @@ def run_tasks(client, scene, function: Callable, tasks: list[dict], *, shared: d
 
         scene = load_scene(scene)
     token = uuid.uuid4().hex[:12]
-    scene_future = payload_future(client, scene)
-    shared_futures = {name: ship(client, value) for name, value in (shared or {}).items()}
-    futures = [client.submit(function, scene_future, **shared_futures, **task, key=f"pathspace-{unit}-{token}-{i}",
-                             pure=False) for i, task in enumerate(tasks)]
-    index_of = {future.key: i for i, future in enumerate(futures)}
+    shipments = Shipments(client, payload=ScenePayload.of(scene), **(shared or {}))
+    index_of: dict = {}   # task key -> (task index, submissions before, the shipments it was given)
+    done = distributed.as_completed(loop=client.loop)
+
+    def submit(index: int, attempt: int = 0) -> None:
+        key = f"pathspace-{unit}-{token}-{index}" + (f"-again-{attempt}" if attempt else "")
+        given = dict(shipments.futures)
+        done.add(client.submit(function, **given, **tasks[index], key=key, pure=False))
+        index_of[key] = (index, attempt, given)
+
     bar = progress_bar(progress, len(tasks), unit, f"{unit}s on the cluster")
     try:
-        for future in distributed.as_completed(futures, loop=client.loop):
+        for index in range(len(tasks)):
+            submit(index)
+        for future in done:
+            index, attempt, given = index_of.pop(future.key)
+            if future.status == "cancelled" and shipments.lost_by(given):
+                submit(index, attempt + 1)   # a value it needed was lost with a worker, and is shipped again
+                continue
             try:
                 output = future.result()
             except Exception as error:
@@ -39,12 +50,11 @@ def run_tasks(client, scene, function: Callable, tasks: list[dict], *, shared: d
             future.release()
             if bar is not None:
                 bar.update(1)
-            yield index_of[future.key], output
+            yield index, output
     finally:
-        outstanding = [future for future in futures if not future.done()]
+        outstanding = list(done.futures)
         if outstanding:  # the caller stopped early
             client.cancel(outstanding)
-        for future in (scene_future, *shared_futures.values()):
-            future.release()
+        shipments.release()
         if bar is not None:
             bar.close()
