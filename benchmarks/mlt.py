@@ -1,19 +1,19 @@
 """Metropolis benchmark: time to a relMSE target for PT, BDPT, PSSMLT (over PT and BDPT), MMLT and path-space MLT.
 
 Measured in one run (the machine is shared; only ratios within a run mean much), per scene (the caustic
-glass sphere, the pool's caustics seen through its rippled water and the ajar door, all 128x128; every
-estimator at the same ``max_depth``):
+glass sphere with its lamp and with a nine times smaller one, the pool's caustics seen through its rippled
+water and the ajar door, all 128x128; every estimator at the same ``max_depth``):
 1. a BDPT reference rendered for ``--reference-time`` seconds;
 2. for every estimator, renders of ``--time`` / 4 and ``--time`` seconds: relMSE against the reference
    (minus the reference's own expected contribution), and the time to reach ``--target`` extrapolated
    from the longer render as seconds x relMSE / target (relMSE falls as 1 / time for every estimator
    here once its chains have spread; the two budgets show how far that holds);
 3. the ratio of each estimator's time to the target to BDPT's (target: the best MLT variant below 1 on
-   the caustic and the gap scenes);
+   the caustic scenes with a small lamp (the pool, the small-lamp glass sphere) and the gap scene);
 4. on the Cornell box: Metropolis mutations per second against BDPT's samples per second at the same
    thread count (target: at least 1).
 
-    python benchmarks/mlt.py [--time 40] [--reference-time 600] [--scenes caustic-glass,pool,ajar-door] [--seeds 3]
+    python benchmarks/mlt.py [--time 40] [--reference-time 600] [--scenes pool,ajar-door] [--seeds 3]
 """
 from __future__ import annotations
 
@@ -83,7 +83,7 @@ def main() -> None:
     parser.add_argument("--time", type=float, default=40.0, help="seconds of the longer render per estimator")
     parser.add_argument("--reference-time", type=float, default=600.0)
     parser.add_argument("--target", type=float, default=1e-2, help="relMSE target")
-    parser.add_argument("--scenes", default="caustic-glass,pool,ajar-door")
+    parser.add_argument("--scenes", default="caustic-glass,caustic-glass-small-lamp,pool,ajar-door")
     parser.add_argument("--max-depth", type=int, default=10)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--estimators", default=",".join(ESTIMATORS))
