@@ -101,7 +101,8 @@ def main() -> None:
         for r in rows:
             extra = ""
             if "mutations_per_second" in r:
-                acceptance = " ".join(f"{kind} {rate:.2f}" for kind, rate in r["acceptance"].items() if rate is not None)
+                acceptance = " ".join(f"{kind} {rate:.2f}" for kind, rate in r["acceptance"].items()
+                                      if rate is not None)
                 extra = (f"  {r['mutations_per_second'] / 1e3:.0f} k mut/s, acceptance {acceptance}, longest "
                          f"rejection run {r['longest_rejection_run']}, b error {r['brightness_error']:.2%}")
             print(f"  {r['name']:12s} {r['relmse']:9.4f} {r['relmse_short']:9.4f} {r['slope']:6.2f} "

@@ -86,10 +86,9 @@ def test_one_task_of_all_passes_is_bit_for_bit_the_single_process_render(workers
     assert np.array_equal(single.image, on_cluster.image) and np.array_equal(single.variance, on_cluster.variance)
 
 
-def kill_when_executing(client, prefix: str, kill: dict, victim: str | None = None) -> threading.Thread:
-    """A thread that SIGKILLs a worker as soon as a task whose key starts with ``prefix`` runs: worker
-    ``victim``, or (None) the one running it; it records the worker and the time in ``kill`` and gives up
-    when ``kill`` gets "done"."""
+def kill_when_executing(client, prefix: str, kill: dict) -> threading.Thread:
+    """A thread that SIGKILLs the worker running a task whose key starts with ``prefix`` as soon as one runs;
+    it records the worker and the time in ``kill`` and gives up when ``kill`` gets "done"."""
 
     def executing(dask_worker):
         return os.getpid(), [str(ts.key) for ts in dask_worker.state.executing]
@@ -99,9 +98,8 @@ def kill_when_executing(client, prefix: str, kill: dict, victim: str | None = No
             running = client.run(executing)
             busy = [address for address, (_, keys) in running.items() if any(k.startswith(prefix) for k in keys)]
             if busy:
-                target = victim or busy[0]
-                os.kill(running[target][0], signal.SIGKILL)
-                kill.update(victim=target, at=time.perf_counter())
+                os.kill(running[busy[0]][0], signal.SIGKILL)
+                kill.update(victim=busy[0], at=time.perf_counter())
                 return
             time.sleep(0.01)
 
@@ -166,7 +164,7 @@ def test_a_render_whose_scene_the_cluster_lost_ships_it_again(workers, monkeypat
     scene = box((32, 32))
     shipped = lose_first_shipment(monkeypatch, workers)
     result = ps.render(scene, "bdpt", spp=8, seed=9, client=workers, task_passes=2)
-    assert payloads(shipped) == 2
+    assert payloads(shipped) == 2 and result.stats["cluster"]["scene_reships"] == 1
     assert result.stats["spp"] == 8 and result.stats["cluster"]["tasks"] == 4
     assert_same_to_rounding(ps.render(scene, "bdpt", spp=8, seed=9).film, result.film)
 
@@ -185,15 +183,20 @@ def test_a_sweep_whose_scene_the_cluster_lost_ships_it_again(workers, monkeypatc
 
 
 def test_a_render_gives_up_on_a_cluster_that_keeps_losing_its_scene(workers, monkeypatch):
-    """Every shipment lost: the render stops after RESHIPS renewals with an error that says why."""
+    """Every shipment lost: the render ships the scene RESHIPS times again, then stops with an error that
+    says why."""
+    shipped = []
+
     def lost(client, value):
+        shipped.append(value)
         future = client.scatter([value], hash=False)[0]
         client.cancel([future])
         return future
 
     monkeypatch.setattr(scenes, "ship", lost)
-    with pytest.raises(RuntimeError, match=f"lost the data shipped to it .payload. {scenes.RESHIPS + 1} times"):
+    with pytest.raises(RuntimeError, match=r"lost the data shipped to it \(payload\) 4 times"):
         ps.render(box((16, 16)), "pt", spp=2, seed=1, client=workers, task_passes=1)
+    assert scenes.RESHIPS == 3 and payloads(shipped) == 4
 
 
 def test_a_sweep_finishes_around_a_failing_cell_and_resumes_from_its_cache(workers, tmp_path):

@@ -15,8 +15,9 @@
 * **Sweeps and convergence runs** make one task per cell and seed (per estimator and seed); each renders
   in one worker thread.  Finished sweep cells are cached, so a sweep run again renders only the cells
   it is missing (:mod:`pathspace.experiment.cache`).
-* **Scenes** go to the cluster once per render or sweep, as a pickled payload that one task holds, and
-  are unpickled once per worker process and kept there with their BVHs (:mod:`pathspace.cluster.scenes`).
+* **Scenes** go to every worker once per render or sweep (again if the cluster loses them), as a pickled
+  payload, and are unpickled once per worker process and kept there with their BVHs
+  (:mod:`pathspace.cluster.scenes`).
 
 Nothing here imports Dask until a client is used; :func:`start_client` starts or joins a cluster.
 """

@@ -47,7 +47,8 @@ class ClusterRun:
     the wall ``seconds`` from the first submission to the last merge, the worker ``threads`` and the
     ``stats`` it adds: ``stats["cluster"]`` = {scheduler, threads, workers_used, tasks, task_passes,
     task_seconds (their render time, summed), tasks_waiting_peak (the most finished tasks at once whose
-    films waited on the workers for their turn, the next one to merge included)}."""
+    films waited on the workers for their turn, the next one to merge included), scene_reships (how many
+    times the scene was shipped again after the cluster lost it)}."""
 
     film: Film
     counters: Counters
@@ -87,9 +88,9 @@ def render_on_cluster(client, scene, estimator, mode, *, spp: int, seed: int, fi
     counters, task_seconds, workers = Counters(), 0.0, set()
     bar = progress_bar(progress, spp, "spp", f"rendering on the cluster ({estimator.name})")
     clock = time.perf_counter()
-    shipments = Shipments(client, payload=ScenePayload.of(scene))
-    index_of: dict = {}   # task key -> (task index, submissions before, the shipments it was given)
-    waiting: dict[int, object] = {}   # finished tasks waiting for the tasks before them (their films stay on workers)
+    shipments = Shipments(client, ScenePayload.of(scene))
+    index_of: dict = {}   # task key -> (task index, times submitted before, the futures it was given)
+    waiting: dict[int, tuple] = {}   # finished tasks waiting for the tasks before them (their films stay on workers)
     merged = submitted = peak = 0
     counted = time.perf_counter()
     done = distributed.as_completed(loop=client.loop)
@@ -97,10 +98,9 @@ def render_on_cluster(client, scene, estimator, mode, *, spp: int, seed: int, fi
     def submit_task(index: int, attempt: int = 0) -> None:
         start = starts[index]
         count = min(task_passes, first_pass + spp - start)
-        key = f"pathspace-passes-{token}-{index}" + (f"-again-{attempt}" if attempt else "")
-        future = client.submit(render_passes, shipments.futures["payload"], estimator, seed, start, count, spectral,
-                               wavelength_sampling, key=key, pure=False)
-        index_of[key] = (index, attempt, dict(shipments.futures))
+        future, given = shipments.submit(render_passes, estimator, seed, start, count, spectral, wavelength_sampling,
+                                         key=f"pathspace-passes-{token}-{index}", attempt=attempt)
+        index_of[future.key] = (index, attempt, given)
         done.add(future)
 
     def submit() -> None:
@@ -112,9 +112,15 @@ def render_on_cluster(client, scene, estimator, mode, *, spp: int, seed: int, fi
             submitted += 1
 
     def result_of(index: int):
+        """The result of finished task ``index``, or None if the cluster lost it with the scene (the task is
+        submitted again)."""
+        future, attempt, given = waiting.pop(index)
         try:
-            return waiting.pop(index).result()
+            return future.result()
         except Exception as error:
+            if future.status == "cancelled" and shipments.lost_by(given):
+                submit_task(index, attempt + 1)
+                return None
             last = min(starts[index] + task_passes, first_pass + spp) - 1
             error.add_note(f"in the cluster task of passes {starts[index]} .. {last}")
             raise
@@ -123,15 +129,15 @@ def render_on_cluster(client, scene, estimator, mode, *, spp: int, seed: int, fi
         submit()
         for future in done:  # each task's future once, when it has finished (after any retries)
             index, attempt, given = index_of.pop(future.key)
-            if future.status == "cancelled" and shipments.lost_by(given):
-                submit_task(index, attempt + 1)   # its scene was lost with a worker, and is shipped again
+            waiting[index] = (future, attempt, given)
+            if future.status != "finished":
+                result_of(index)   # raises the task's error, or (lost with the scene) submits it again
                 continue
-            waiting[index] = future
             peak = max(peak, len(waiting))
-            if future.status == "error":
-                result_of(index)
             while merged in waiting:  # its film is fetched only now: the client holds one task film at a time
                 result = result_of(merged)
+                if result is None:
+                    break
                 film.merge(result.film)
                 counters.merge(result.counters)
                 task_seconds += result.seconds
@@ -151,5 +157,5 @@ def render_on_cluster(client, scene, estimator, mode, *, spp: int, seed: int, fi
     seconds = time.perf_counter() - clock
     stats = {"cluster": {"scheduler": client.scheduler.address, "threads": threads, "workers_used": len(workers),
                          "tasks": len(starts), "task_passes": task_passes, "task_seconds": task_seconds,
-                         "tasks_waiting_peak": peak}}
+                         "tasks_waiting_peak": peak, "scene_reships": shipments.renewals}}
     return ClusterRun(film, counters, seconds, threads, stats)

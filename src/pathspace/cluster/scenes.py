@@ -53,25 +53,36 @@ def ship(client, value):
 
 
 class Shipments:
-    """Values copied to every worker for a render's or sweep's tasks to depend on (:attr:`futures`, by name),
-    shipped again when the cluster loses one.
+    """The scene's payload and other values copied to every worker for a render's or sweep's tasks to depend
+    on (:attr:`futures`, by name), shipped again when the cluster loses one.
 
     Scattered data has no task that could compute it again: when every worker holding it has died, Dask
-    forgets it and cancels the tasks that need it ("already forgotten").  :func:`ship` gives every worker
-    a copy, but Dask's active memory manager drops the copies that no assigned task needs (its
-    ReduceReplicas policy, on by default), so the death of one worker can lose a value.  A caller whose
-    task comes back cancelled asks :meth:`lost_by` with the futures the task was given; if a value it
-    needed was lost, that value is shipped again and the caller submits the task again.
+    forgets it and cancels the tasks that need it ("already forgotten"; "lost dependencies" for tasks
+    submitted after), finished ones whose results were on the dead workers too.  :func:`ship` gives every
+    worker a copy, but Dask's active memory manager drops the copies that no assigned task needs (its
+    ReduceReplicas policy, on by default), so the death of one worker can lose a value.  Tasks go through
+    :meth:`submit`; a caller whose task comes back cancelled asks :meth:`lost_by` with the futures the task
+    was given, and if a value it needed was lost (that value is then shipped again), submits it again.
     """
 
-    def __init__(self, client, **values) -> None:
-        self.client, self.values, self.renewals = client, values, 0
-        self.futures = {name: ship(client, value) for name, value in values.items()}
+    def __init__(self, client, payload: ScenePayload, **shared) -> None:
+        self.client, self.values, self.renewals = client, {"payload": payload, **shared}, 0
+        self.futures = {name: ship(client, value) for name, value in self.values.items()}
+
+    def submit(self, function, *args, key: str, attempt: int = 0, **kwargs) -> tuple[object, dict]:
+        """Submit ``function(payload, *args, **shared, **kwargs)`` (the values' current futures) as task ``key``
+        (its ``attempt``-th submission again: ``key-again-attempt``); returns its future and the futures it
+        was given (for :meth:`lost_by`)."""
+        given = dict(self.futures)
+        shared = {name: future for name, future in given.items() if name != "payload"}
+        future = self.client.submit(function, given["payload"], *args, **shared, **kwargs, pure=False,
+                                    key=f"{key}-again-{attempt}" if attempt else key)
+        return future, given
 
     def lost_by(self, given: dict) -> bool:
-        """Whether a cancelled task lost a value it was ``given`` (a copy of :attr:`futures` made when it was
-        submitted): shipped again since, or lost now (then shipped again here).  Raises RuntimeError after
-        ``RESHIPS`` renewals: a cluster that keeps losing every worker cannot finish the work."""
+        """Whether a cancelled task lost a value it was ``given`` (by :meth:`submit`): shipped again since, or
+        lost now (then shipped again here).  Raises RuntimeError after ``RESHIPS`` renewals: a cluster that
+        keeps losing every worker cannot finish the work."""
         renewed = any(self.futures[name] is not future for name, future in given.items())
         lost = [name for name, future in self.futures.items() if future.status != "finished"]
         if lost:
