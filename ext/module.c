@@ -79,6 +79,11 @@ static PyMethodDef module_methods[] = {
      "pinhole_connect(receivers, position, forward, right, image_up, tan_x, tan_y, width, height, lens_area)\n--\n\n"
      "(wi (3, N), pdf (N,), raster (2, N), on_film (N,), cos (N,)): receivers ((3, N) float32 or float64) joined "
      "to a pinhole camera (see ext/camera.c)."},
+    {"next_event_value", ps_next_event_value, METH_VARARGS,
+     "next_event_value(beta, f_cos, le, pdf_light, pdf_bsdf, facing, delta, heuristic, exponent)\n--\n\n"
+     "(value (C, N) float64, useful (N,) bool): path tracing's light samples, (beta f_cos) (le w / pdf_light) "
+     "where useful (facing, positive, some channel of f_cos > 0), with w the MIS weight (heuristic 0: none, "
+     "1: balance, 2: power with `exponent`, 3: uniform; 1 where delta) (see ext/nee.c)."},
     {"moments_add", ps_moments_add, METH_VARARGS,
      "moments_add(count, exponent, scaled_mean, scaled_m2, start, values)\n--\n\n(n,) float64, each column's "
      "largest |value|: one sample (values (C, n)) added to the moments of pixels start .. start + n - 1, columns "

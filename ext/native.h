@@ -75,6 +75,9 @@ PyObject *ps_area_light_sample(PyObject *module, PyObject *args);
 /* Receivers joined to a pinhole camera: direction, density, raster position, cosine (camera.c). */
 PyObject *ps_pinhole_connect(PyObject *module, PyObject *args);
 
+/* Path tracing's light samples: MIS-weighted value and whether each is worth a shadow ray (nee.c). */
+PyObject *ps_next_event_value(PyObject *module, PyObject *args);
+
 /* One sample added to a run of pixels' film moments (film.c). */
 PyObject *ps_moments_add(PyObject *module, PyObject *args);
 

@@ -54,6 +54,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
+from .. import _native
 from ..bsdfs import MaterialLanes
 from ..checks import choice, number
 from ..mis import TWO_STRATEGY, mis_weight
@@ -84,6 +85,8 @@ REFILL = TILE_PIXELS // 8
 DEEP_DEPTH = 32
 DEEP_STEPS = 8
 PATH_FIELDS = WALK_FIELDS + ("ticket", "radiance")
+# The MIS heuristics as ext/nee.c numbers them ("none": light samples unweighted).
+MIS_CODES = {"none": 0, "balance": 1, "power": 2, "uniform": 3}
 
 
 @dataclass
@@ -376,21 +379,21 @@ class PathTracer(Estimator):
 
         Estimates Le f |cos| / p_light (Veach 1997, eq. 9.4) with one light
         sample and one shadow ray per lane where the contribution is non-zero.
-        Delta materials get nothing (f is zero for any light direction).
+        Delta materials get nothing (f is zero for any light direction).  The
+        weighting is one C pass (``ext/nee.c``).
         """
         p, surface = arrival.p, arrival.surface
         ls = scene.lights.sample_li(p, u, colours, self.light_selection, self.light_measure)
         f_cos, pdf_bsdf = materials.eval(surface, ls.wi)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            scale = 1.0 / ls.pdf
-        if self.light_sampling == "mis":
-            w = mis_weight(ls.pdf, pdf_bsdf, self.mis, self.mis_beta)
-            scale *= np.where(ls.delta, 1.0, w) if scene.lights.has_delta else w
-        useful = ls.facing & (scale > 0) & (np.maximum(np.maximum(f_cos[0], f_cos[1]), f_cos[2]) > 0)
+        heuristic = MIS_CODES[self.mis] if self.light_sampling == "mis" else MIS_CODES["none"]
+        f64, flag = (lambda a: np.ascontiguousarray(a, np.float64)), (lambda a: np.ascontiguousarray(a, bool))
+        value, useful = _native.next_event_value(f64(beta), f64(f_cos), f64(ls.value), f64(ls.pdf), f64(pdf_bsdf),
+                                                 flag(ls.facing), flag(ls.delta) if scene.lights.has_delta else None,
+                                                 heuristic, self.mis_beta)
         lanes = np.flatnonzero(useful)
         if lanes.size:
-            useful[lanes[light_sample_blocked(scene, p, arrival.eps, surface.n, ls, lanes)]] = False
-        return np.where(useful, beta * f_cos * (ls.value * scale), 0.0)
+            value[:, lanes[light_sample_blocked(scene, p, arrival.eps, surface.n, ls, lanes)]] = 0.0
+        return value
 
     def _mixture(self, scene, materials, arrival: Arrival, sample, u, colours) -> None:
         """Turn BSDF samples into samples of the mixture alpha p_light + (1 - alpha) p_bsdf (in place).
