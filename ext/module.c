@@ -84,6 +84,10 @@ static PyMethodDef module_methods[] = {
      "(value (C, N) float64, useful (N,) bool): path tracing's light samples, (beta f_cos) (le w / pdf_light) "
      "where useful (facing, positive, some channel of f_cos > 0), with w the MIS weight (heuristic 0: none, "
      "1: balance, 2: power with `exponent`, 3: uniform; 1 where delta) (see ext/nee.c)."},
+    {"scatter_step", ps_scatter_step, METH_VARARGS,
+     "scatter_step(beta, weight, survival, u, p, normal, eps, wi)\n--\n\n(beta (C, N) float64, alive (N,) bool, "
+     "origin (3, N) float32): walks leaving points p along BSDF samples wi of weight `weight`, surviving roulette "
+     "with probability `survival` (None: 1) decided by u (see ext/scatter.c)."},
     {"moments_add", ps_moments_add, METH_VARARGS,
      "moments_add(count, exponent, scaled_mean, scaled_m2, start, values)\n--\n\n(n,) float64, each column's "
      "largest |value|: one sample (values (C, n)) added to the moments of pixels start .. start + n - 1, columns "

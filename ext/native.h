@@ -78,6 +78,9 @@ PyObject *ps_pinhole_connect(PyObject *module, PyObject *args);
 /* Path tracing's light samples: MIS-weighted value and whether each is worth a shadow ray (nee.c). */
 PyObject *ps_next_event_value(PyObject *module, PyObject *args);
 
+/* Random walks leaving their vertices: throughput, roulette, the next ray's origin (scatter.c). */
+PyObject *ps_scatter_step(PyObject *module, PyObject *args);
+
 /* One sample added to a run of pixels' film moments (film.c). */
 PyObject *ps_moments_add(PyObject *module, PyObject *args);
 

@@ -37,9 +37,10 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from .. import _native
 from ..bsdfs import BSDFSample, Surface
 from ..roulette import RussianRoulette
-from ..vecmath import RAY_TMIN, dot, offset_origin
+from ..vecmath import RAY_TMIN, dot
 from .wavefront import Lanes
 
 __all__ = ["WALK_FIELDS", "Arrival", "Dimensions", "Walk"]
@@ -178,17 +179,16 @@ class Walk:
         """Leave ``hit`` along ``sample``: throughput times its weight over the ``survival`` probability
         (None: 1; decided by ``u_roulette`` (1, N)), the sample's direction and density, and q for MIS
         (``q_mis``, or :meth:`mis_survival`) if the lanes keep a ``q``.  Returns a mask of the lanes that go on
-        (not absorbed, not terminated by roulette); the caller keeps them."""
+        (not absorbed, not terminated by roulette); the caller keeps them.  The throughput, the roulette's
+        decision and the next ray's origin are one C pass (``ext/scatter.c``)."""
         lanes = self.lanes
-        alive = sample.weight.max(axis=0) > 0
-        lanes.beta = lanes.beta * sample.weight
-        if survival is not None:
-            alive &= u_roulette[0] < survival
-            np.divide(lanes.beta, survival, out=lanes.beta, where=survival > 0)
+        f64, f32 = (lambda a: np.ascontiguousarray(a, np.float64)), (lambda a: np.ascontiguousarray(a, np.float32))
+        lanes.beta, alive, lanes.origin = _native.scatter_step(
+            f64(lanes.beta), f64(sample.weight), None if survival is None else f64(survival), f64(u_roulette[0]),
+            f32(hit.p), f32(hit.normal), f32(hit.eps), f32(sample.wi))
         if "q" in lanes.fields:
             lanes.q = self.mis_survival(hit) if q_mis is None else q_mis
         lanes.pdf, lanes.delta, lanes.direction = sample.pdf, sample.delta, sample.wi
         if sample.eta is not None and "eta_scale" in lanes.fields:
             lanes.eta_scale = lanes.eta_scale * sample.eta * sample.eta
-        lanes.origin = offset_origin(hit.p, hit.normal, hit.eps, sample.wi)
         return alive
