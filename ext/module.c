@@ -83,7 +83,13 @@ static PyMethodDef module_methods[] = {
      "next_event_value(beta, f_cos, le, pdf_light, pdf_bsdf, facing, delta, heuristic, exponent)\n--\n\n"
      "(value (C, N) float64, useful (N,) bool): path tracing's light samples, (beta f_cos) (le w / pdf_light) "
      "where useful (facing, positive, some channel of f_cos > 0), with w the MIS weight (heuristic 0: none, "
-     "1: balance, 2: power with `exponent`, 3: uniform; 1 where delta) (see ext/nee.c)."},
+     "1: balance, 2: power with `exponent`, 3: uniform; 1 where delta) (see ext/direct.c)."},
+    {"area_emission", ps_area_emission, METH_VARARGS,
+     "area_emission(prim, emitter_of_triangle, table, area, two_sided, pmf, origin, p, normal, direction, pdf_prev, "
+     "delta_prev, strategy, exponent)\n--\n\n(lanes (M,) int64, emitter (M,) int64, weight (M,) float64): the "
+     "lanes whose rays hit an area light, its emitting triangle and the weight of its emission (0 behind one-sided "
+     "lights; MIS against light samples by area: strategy 1 balance, 2 power, 3 uniform; 0: 1; 4: 0 but after "
+     "delta lobes) (see ext/direct.c)."},
     {"scatter_step", ps_scatter_step, METH_VARARGS,
      "scatter_step(beta, weight, survival, u, p, normal, eps, wi)\n--\n\n(beta (C, N) float64, alive (N,) bool, "
      "origin (3, N) float32): walks leaving points p along BSDF samples wi of weight `weight`, surviving roulette "

@@ -75,8 +75,10 @@ PyObject *ps_area_light_sample(PyObject *module, PyObject *args);
 /* Receivers joined to a pinhole camera: direction, density, raster position, cosine (camera.c). */
 PyObject *ps_pinhole_connect(PyObject *module, PyObject *args);
 
-/* Path tracing's light samples: MIS-weighted value and whether each is worth a shadow ray (nee.c). */
+/* Path tracing's light samples (their MIS-weighted value, whether each is worth a shadow ray) and the weights of
+ * the area lights its rays hit (direct.c). */
 PyObject *ps_next_event_value(PyObject *module, PyObject *args);
+PyObject *ps_area_emission(PyObject *module, PyObject *args);
 
 /* Random walks leaving their vertices: throughput, roulette, the next ray's origin (scatter.c). */
 PyObject *ps_scatter_step(PyObject *module, PyObject *args);

@@ -71,12 +71,19 @@ int ps_parse_segments(PyObject *const arrays[6], PyObject *lanes, Segments *s)
     }
     s->lanes = (const int64_t *)PyArray_DATA(l);
     s->count = PyArray_DIM(l, 0);
-    for (Py_ssize_t i = 0; i < s->count; ++i)
+    Py_ssize_t bad = -1;
+    long long lane = 0;
+    Py_BEGIN_ALLOW_THREADS   /* a wavefront's worth of lanes: other threads need not wait for the check */
+    for (Py_ssize_t i = 0; i < s->count && bad < 0; ++i)
         if (s->lanes[i] < 0 || s->lanes[i] >= s->width) {
-            PyErr_Format(PyExc_IndexError, "lanes[%zd] = %lld is outside 0 .. %zd", i, (long long)s->lanes[i],
-                         s->width - 1);
-            return -1;
+            bad = i;
+            lane = (long long)s->lanes[i];
         }
+    Py_END_ALLOW_THREADS
+    if (bad >= 0) {
+        PyErr_Format(PyExc_IndexError, "lanes[%zd] = %lld is outside 0 .. %zd", bad, lane, s->width - 1);
+        return -1;
+    }
     return 0;
 }
 
@@ -122,7 +129,7 @@ PyObject *ps_shadow_rays(PyObject *module, PyObject *args, PyObject *kwargs)
         return NULL;
     }
     float *o = (float *)PyArray_DATA(origin), *d = (float *)PyArray_DATA(direction), *t = (float *)PyArray_DATA(tmax);
-    for (Py_ssize_t i = 0; i < m; ++i) {   /* the GIL is held: lanes were checked above and cannot change */
+    for (Py_ssize_t i = 0; i < m; ++i) {   /* ps_segment_ray bounds-checks each lane as it reads it */
         float r[8] = {0};
         ps_segment_ray(&s, i, r);
         for (int c = 0; c < 3; ++c) {

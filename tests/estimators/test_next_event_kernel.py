@@ -1,4 +1,4 @@
-"""The C kernel of path tracing's light samples (ext/nee.c) against the NumPy code it replaces.
+"""The C kernel of path tracing's light samples (ext/direct.c) against the NumPy code it replaces.
 
 ``PathTracer._next_event`` takes the MIS-weighted value of its light samples, and which of them deserve a
 shadow ray, from ``_native.next_event_value``.  The reference below is the NumPy code it replaced, with one

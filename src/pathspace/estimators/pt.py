@@ -61,7 +61,7 @@ from ..mis import TWO_STRATEGY, mis_weight
 from ..roulette import RussianRoulette, roulette_warnings
 from ..sampler import Sampler
 from ..spectra import RGBMode
-from ..vecmath import RAY_TMIN, offset_origin
+from ..vecmath import RAY_TMIN, dot, offset_origin
 from . import parameters as p
 from .base import TILE_PIXELS, Counters, Estimator, ItemResult, RenderJob, WorkItem, parameter
 from .visibility import light_sample_blocked
@@ -85,8 +85,9 @@ REFILL = TILE_PIXELS // 8
 DEEP_DEPTH = 32
 DEEP_STEPS = 8
 PATH_FIELDS = WALK_FIELDS + ("ticket", "radiance")
-# The MIS heuristics as ext/nee.c numbers them ("none": light samples unweighted).
-MIS_CODES = {"none": 0, "balance": 1, "power": 2, "uniform": 3}
+# The strategies' weights as ext/direct.c numbers them: "none" unweighted, the MIS heuristics, and "nee" (emitters
+# hit by BSDF samples where light samples are taken alone: 0 but after the camera and delta lobes).
+MIS_CODES = {"none": 0, "balance": 1, "power": 2, "uniform": 3, "nee": 4}
 
 
 @dataclass
@@ -332,21 +333,39 @@ class PathTracer(Estimator):
         return np.where(delta_prev, 1.0, mis_weight(pdf_bsdf, pdf_light, self.mis, self.mis_beta))
 
     def _emission(self, scene, arrival: Arrival, lanes: Lanes, bounce: _Bounce) -> None:
-        """Add emission of area lights hit by the current rays (Veach 1997, eq. 9.4 with 9.13)."""
+        """Add emission of area lights hit by the current rays (Veach 1997, eq. 9.4 with 9.13): which lanes hit
+        one and the weights are one C pass (``ext/direct.c``), but for MIS against light samples by solid angle."""
+        area = scene.lights.area   # area lights are the first entities: emitting triangle = entity
+        if bounce.strategy == "mis" and self.light_measure != "area":
+            emits, entity, weight = self._emitters_hit(scene, arrival, lanes, bounce)
+        else:
+            strategy = {"mis": self.mis, "nee": "nee"}.get(bounce.strategy, "none")
+            geometry = (np.ascontiguousarray(a, np.float32) for a in (lanes.origin, arrival.p, arrival.normal,
+                                                                      lanes.direction))
+            emits, entity, weight = _native.area_emission(
+                np.ascontiguousarray(arrival.prim, np.int32), area.emitter_of_triangle, area.table, area.area,
+                area.two_sided, scene.lights.pmf(self.light_selection), *geometry,
+                np.ascontiguousarray(lanes.pdf, np.float64), np.ascontiguousarray(lanes.delta, bool),
+                MIS_CODES[strategy], self.mis_beta)
+        if emits.size:
+            le = area.radiance_of(entity, bounce.mode.colours(lanes).take(emits))
+            lanes.radiance[:, emits] += np.take(lanes.beta, emits, axis=1) * (le * weight)
+
+    def _emitters_hit(self, scene, arrival: Arrival, lanes: Lanes, bounce: _Bounce):
+        """(lanes, emitting triangles, weights) of the current rays that hit an area light: what
+        ``_native.area_emission`` finds, in NumPy, with the light-sampling densities of any measure."""
         lights = scene.lights
-        entity = lights.area.emitter_of_triangle.take(arrival.prim)  # area lights are the first entities
+        entity = lights.area.emitter_of_triangle.take(arrival.prim)
         emits = np.flatnonzero(entity >= 0)
-        if not emits.size:
-            return
         entity = entity.take(emits)
         normal, wo = np.take(arrival.normal, emits, axis=1), -np.take(lanes.direction, emits, axis=1)
-        le = lights.le(entity, normal, wo, bounce.mode.colours(lanes).take(emits))
+        facing = lights.area.two_sided.take(entity) | (dot(normal, wo) > 0)
         pdf_light = None
         if bounce.strategy == "mis":
             pdf_light = lights.pdf_li(entity, np.take(lanes.origin, emits, axis=1), np.take(arrival.p, emits, axis=1),
                                       self.light_selection, self.light_measure)
-        le = le * self._weight_of_hits(lanes.pdf.take(emits), pdf_light, lanes.delta.take(emits), bounce.strategy)
-        lanes.radiance[:, emits] += np.take(lanes.beta, emits, axis=1) * le
+        weight = self._weight_of_hits(lanes.pdf.take(emits), pdf_light, lanes.delta.take(emits), bounce.strategy)
+        return emits, entity, np.where(facing, weight, 0.0)
 
     def _escape(self, scene, escaped: np.ndarray, lanes: Lanes, bounce: _Bounce) -> None:
         """Add environment radiance to the rays ``escaped`` that left the scene."""
@@ -380,7 +399,7 @@ class PathTracer(Estimator):
         Estimates Le f |cos| / p_light (Veach 1997, eq. 9.4) with one light
         sample and one shadow ray per lane where the contribution is non-zero.
         Delta materials get nothing (f is zero for any light direction).  The
-        weighting is one C pass (``ext/nee.c``).
+        weighting is one C pass (``ext/direct.c``).
         """
         p, surface = arrival.p, arrival.surface
         ls = scene.lights.sample_li(p, u, colours, self.light_selection, self.light_measure)
