@@ -122,9 +122,13 @@ class StreamSampler:
     def keep(self, indices: np.ndarray) -> None:
         """Only the lanes at ``indices`` (increasing, of the current live lanes) stay alive."""
         self.unit = self.unit.take(indices)
-        self.counts = np.bincount(self.unit, minlength=len(self.generators))
+        self.counts = self._counts(self.unit)
         if len(self.generators) > 8 and np.count_nonzero(self.counts) < len(self.generators) // 2:
             self._compact()
+
+    def _counts(self, unit: np.ndarray) -> np.ndarray:
+        """Live lanes per segment, of lanes whose segments ``unit`` never decrease (lanes stay in segment order)."""
+        return np.diff(np.searchsorted(unit, np.arange(len(self.generators) + 1)))
 
     def _compact(self) -> None:
         """Forget the segments without live lanes (renumbering the others in order)."""
@@ -146,7 +150,7 @@ class StreamSampler:
         part = StreamSampler(self.seed)
         part.generators = self.generators
         part.unit = self.unit.take(indices)
-        part.counts = np.bincount(part.unit, minlength=len(self.generators))
+        part.counts = part._counts(part.unit)
         part._compact()
         rest = np.ones(self.lanes, dtype=bool)
         rest[indices] = False

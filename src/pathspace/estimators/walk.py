@@ -134,7 +134,7 @@ class Walk:
         (last axis), which are returned compacted."""
         self.lanes.keep(indices)
         self.sampler.keep(indices)
-        return tuple(np.take(a, indices, axis=-1) for a in arrays)
+        return tuple(a.take(indices, axis=-1) for a in arrays)
 
     def arrive(self, prim: np.ndarray, b1: np.ndarray, b2: np.ndarray, t: np.ndarray) -> Arrival:
         """The surface points of hits on triangles ``prim`` at barycentrics ``b1``, ``b2``, distance ``t``."""

@@ -42,12 +42,14 @@ class ItemBook:
 
     def store(self, tickets: np.ndarray, values: np.ndarray) -> None:
         """Write finished samples ``values`` (C, k) of the lanes holding increasing ``tickets``."""
-        bounds = np.searchsorted(tickets, self.first + [self._next_ticket])
-        for j, (lo, hi) in enumerate(zip(bounds[:-1], bounds[1:])):
+        bounds = np.searchsorted(tickets, self.first + [self._next_ticket]).tolist()
+        for j, first in enumerate(self.first):
+            lo, hi = bounds[j], bounds[j + 1]
             if hi > lo:
-                where = tickets[lo:hi] - self.first[j]
-                for c in range(self.channels):
-                    self.values[j][c].put(where, values[c, lo:hi])
+                where = tickets[lo:hi] - first
+                item = self.values[j]
+                for c in range(self.channels):   # put releases the GIL; a fancy-indexed assignment would not
+                    item[c].put(where, values[c, lo:hi])
                 self.remaining[j] -= hi - lo
 
     def finished(self) -> list[tuple[object, np.ndarray]]:
@@ -74,8 +76,8 @@ class Lanes:
 
     def keep(self, indices: np.ndarray) -> None:
         """Keep only the lanes ``indices``."""
-        for name in self.fields:
-            setattr(self, name, np.take(getattr(self, name), indices, axis=-1))
+        for name in self.fields:   # the array's own take: no Python-level wrapper on this path of every bounce
+            setattr(self, name, getattr(self, name).take(indices, axis=-1))
 
     def split(self, indices: np.ndarray) -> "Lanes":
         """Remove the lanes ``indices`` (increasing) and return them as lanes of their own."""
