@@ -8,7 +8,7 @@ setup(
             "pathspace._native",
             sources=["ext/module.c", "ext/embree_loader.c", "ext/accel.c", "ext/mis.c", "ext/geometry.c",
                      "ext/shadow.c", "ext/primary.c", "ext/paths.c", "ext/film.c", "ext/lights.c", "ext/camera.c",
-                     "ext/direct.c", "ext/scatter.c"],
+                     "ext/direct.c", "ext/scatter.c", "ext/warp.c"],
             depends=["ext/native.h", "ext/embree4_api.h", "ext/shadow.h"],
             include_dirs=["ext", numpy.get_include()],
             extra_compile_args=["-O3", "-std=c11", "-D_GNU_SOURCE", "-Wall", "-Wextra",

@@ -94,6 +94,10 @@ static PyMethodDef module_methods[] = {
      "scatter_step(beta, weight, survival, u, p, normal, eps, wi)\n--\n\n(beta (C, N) float64, alive (N,) bool, "
      "origin (3, N) float32): walks leaving points p along BSDF samples wi of weight `weight`, surviving roulette "
      "with probability `survival` (None: 1) decided by u (see ext/scatter.c)."},
+    {"cosine_about", ps_cosine_about, METH_VARARGS,
+     "cosine_about(n, u0, cos_phi, sin_phi)\n--\n\n(3, N) float32: directions cosine-distributed about unit normals "
+     "n ((3, N) float32), n plus the point of the unit sphere at z = 1 - 2 u0 and angle phi, normalised "
+     "(see ext/warp.c)."},
     {"moments_add", ps_moments_add, METH_VARARGS,
      "moments_add(count, exponent, scaled_mean, scaled_m2, start, values)\n--\n\n(n,) float64, each column's "
      "largest |value|: one sample (values (C, n)) added to the moments of pixels start .. start + n - 1, columns "

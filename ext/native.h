@@ -83,6 +83,9 @@ PyObject *ps_area_emission(PyObject *module, PyObject *args);
 /* Random walks leaving their vertices: throughput, roulette, the next ray's origin (scatter.c). */
 PyObject *ps_scatter_step(PyObject *module, PyObject *args);
 
+/* Cosine-weighted directions about unit normals (warp.c). */
+PyObject *ps_cosine_about(PyObject *module, PyObject *args);
+
 /* One sample added to a run of pixels' film moments (film.c). */
 PyObject *ps_moments_add(PyObject *module, PyObject *args);
 

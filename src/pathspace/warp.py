@@ -9,6 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from . import _native
+
 __all__ = [
     "square_to_uniform_sphere",
     "square_to_uniform_sphere_pdf",
@@ -36,11 +38,12 @@ def square_to_uniform_sphere_pdf(v: np.ndarray) -> np.ndarray:
 
 def square_to_cosine_about(n: np.ndarray, u: np.ndarray) -> np.ndarray:
     """Directions with density max(cos, 0) / pi about unit normals n (3, N), without a tangent frame:
-    n plus a uniform point on the unit sphere, normalised (Archimedes' hat-box theorem)."""
-    d = n + square_to_uniform_sphere(u)
-    length = np.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2])
-    # The sum vanishes only when the sphere point is exactly -n (probability 0).
-    return np.where(length > 1e-6, d / np.maximum(length, np.float32(1e-6)), n)
+    n plus the uniform point of the unit sphere :func:`square_to_uniform_sphere` makes of u, normalised
+    (Archimedes' hat-box theorem; n itself where the sum vanishes, probability 0).  One C pass
+    (``ext/warp.c``) but for the angle's cosine and sine, which NumPy computes as the sphere's warp does."""
+    phi = np.float32(2 * np.pi) * u[1].astype(np.float32)
+    return _native.cosine_about(np.ascontiguousarray(n, np.float32), np.ascontiguousarray(u[0], np.float64),
+                                np.cos(phi), np.sin(phi))
 
 
 def square_to_uniform_triangle(u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
