@@ -94,6 +94,9 @@ static PyMethodDef module_methods[] = {
      "scatter_step(beta, weight, survival, u, p, normal, eps, wi)\n--\n\n(beta (C, N) float64, alive (N,) bool, "
      "origin (3, N) float32): walks leaving points p along BSDF samples wi of weight `weight`, surviving roulette "
      "with probability `survival` (None: 1) decided by u (see ext/scatter.c)."},
+    {"take_lanes", ps_take_lanes, METH_VARARGS,
+     "take_lanes(indices, arrays)\n--\n\nlist: numpy.take(a, indices, axis=-1) of every array a of the list `arrays` "
+     "(lanes along the last axis, as many in each), in one call with the GIL released (see ext/lanes.c)."},
     {"cosine_about", ps_cosine_about, METH_VARARGS,
      "cosine_about(n, u0, cos_phi, sin_phi)\n--\n\n(3, N) float32: directions cosine-distributed about unit normals "
      "n ((3, N) float32), n plus the point of the unit sphere at z = 1 - 2 u0 and angle phi, normalised "

@@ -83,6 +83,9 @@ PyObject *ps_area_emission(PyObject *module, PyObject *args);
 /* Random walks leaving their vertices: throughput, roulette, the next ray's origin (scatter.c). */
 PyObject *ps_scatter_step(PyObject *module, PyObject *args);
 
+/* The columns `indices` of every per-lane array: a wavefront's compaction (lanes.c). */
+PyObject *ps_take_lanes(PyObject *module, PyObject *args);
+
 /* Cosine-weighted directions about unit normals (warp.c). */
 PyObject *ps_cosine_about(PyObject *module, PyObject *args);
 

@@ -41,7 +41,7 @@ from .. import _native
 from ..bsdfs import BSDFSample, Surface
 from ..roulette import RussianRoulette
 from ..vecmath import RAY_TMIN, dot
-from .wavefront import Lanes
+from .wavefront import Lanes, take_lanes
 
 __all__ = ["WALK_FIELDS", "Arrival", "Dimensions", "Walk"]
 
@@ -91,8 +91,8 @@ class Arrival:
 
     def keep(self, indices: np.ndarray) -> "Arrival":
         """The arrivals of lanes ``indices``."""
-        return Arrival(*(np.take(getattr(self, name), indices, axis=-1) for name in
-                         ("prim", "t", "p", "normal", "eps", "cos", "direction", "material")))
+        return Arrival(*take_lanes(indices, *(getattr(self, name) for name in
+                                              ("prim", "t", "p", "normal", "eps", "cos", "direction", "material"))))
 
 
 class Walk:
@@ -134,7 +134,7 @@ class Walk:
         (last axis), which are returned compacted."""
         self.lanes.keep(indices)
         self.sampler.keep(indices)
-        return tuple(a.take(indices, axis=-1) for a in arrays)
+        return tuple(take_lanes(indices, *arrays))
 
     def arrive(self, prim: np.ndarray, b1: np.ndarray, b2: np.ndarray, t: np.ndarray) -> Arrival:
         """The surface points of hits on triangles ``prim`` at barycentrics ``b1``, ``b2``, distance ``t``."""

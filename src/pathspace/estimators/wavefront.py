@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["ItemBook", "Lanes"]
+from .. import _native
+
+__all__ = ["ItemBook", "Lanes", "take_lanes"]
 
 
 class ItemBook:
@@ -62,6 +64,12 @@ class ItemBook:
         return out[::-1]
 
 
+def take_lanes(indices: np.ndarray, *arrays: np.ndarray) -> list[np.ndarray]:
+    """``np.take(a, indices, axis=-1)`` of every array (lanes along the last axis), in one C call that releases
+    the GIL (``ext/lanes.c``): a wavefront's compaction, every bounce."""
+    return _native.take_lanes(np.ascontiguousarray(indices, np.int64), list(arrays))
+
+
 class Lanes:
     """Per-lane state arrays (lanes along the last axis), compacted and extended together."""
 
@@ -75,13 +83,14 @@ class Lanes:
         return int(getattr(self, self.fields[0]).shape[-1])
 
     def keep(self, indices: np.ndarray) -> None:
-        """Keep only the lanes ``indices``."""
-        for name in self.fields:   # the array's own take: no Python-level wrapper on this path of every bounce
-            setattr(self, name, getattr(self, name).take(indices, axis=-1))
+        """Keep only the lanes ``indices`` (int64)."""
+        for name, kept in zip(self.fields, take_lanes(indices, *(getattr(self, name) for name in self.fields))):
+            setattr(self, name, kept)
 
     def split(self, indices: np.ndarray) -> "Lanes":
-        """Remove the lanes ``indices`` (increasing) and return them as lanes of their own."""
-        part = Lanes(self.fields, **{name: np.take(getattr(self, name), indices, axis=-1) for name in self.fields})
+        """Remove the lanes ``indices`` (increasing int64) and return them as lanes of their own."""
+        part = Lanes(self.fields, **dict(zip(self.fields, take_lanes(indices, *(getattr(self, name)
+                                                                             for name in self.fields)))))
         rest = np.ones(self.size, dtype=bool)
         rest[indices] = False
         self.keep(np.flatnonzero(rest))
