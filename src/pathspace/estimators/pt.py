@@ -405,10 +405,10 @@ class PathTracer(Estimator):
         ls = scene.lights.sample_li(p, u, colours, self.light_selection, self.light_measure)
         f_cos, pdf_bsdf = materials.eval(surface, ls.wi)
         heuristic = MIS_CODES[self.mis] if self.light_sampling == "mis" else MIS_CODES["none"]
-        f64, flag = (lambda a: np.ascontiguousarray(a, np.float64)), (lambda a: np.ascontiguousarray(a, bool))
-        value, useful = _native.next_event_value(f64(beta), f64(f_cos), f64(ls.value), f64(ls.pdf), f64(pdf_bsdf),
-                                                 flag(ls.facing), flag(ls.delta) if scene.lights.has_delta else None,
-                                                 heuristic, self.mis_beta)
+        weighed = (np.ascontiguousarray(a, np.float64) for a in (beta, f_cos, ls.value, ls.pdf, pdf_bsdf))
+        delta = np.ascontiguousarray(ls.delta, bool) if scene.lights.has_delta else None
+        value, useful = _native.next_event_value(*weighed, np.ascontiguousarray(ls.facing, bool), delta, heuristic,
+                                                 self.mis_beta)
         lanes = np.flatnonzero(useful)
         if lanes.size:
             value[:, lanes[light_sample_blocked(scene, p, arrival.eps, surface.n, ls, lanes)]] = 0.0

@@ -182,10 +182,10 @@ class Walk:
         (not absorbed, not terminated by roulette); the caller keeps them.  The throughput, the roulette's
         decision and the next ray's origin are one C pass (``ext/scatter.c``)."""
         lanes = self.lanes
-        f64, f32 = (lambda a: np.ascontiguousarray(a, np.float64)), (lambda a: np.ascontiguousarray(a, np.float32))
-        lanes.beta, alive, lanes.origin = _native.scatter_step(
-            f64(lanes.beta), f64(sample.weight), None if survival is None else f64(survival), f64(u_roulette[0]),
-            f32(hit.p), f32(hit.normal), f32(hit.eps), f32(sample.wi))
+        beta, weight, u = (np.ascontiguousarray(a, np.float64) for a in (lanes.beta, sample.weight, u_roulette[0]))
+        geometry = (np.ascontiguousarray(a, np.float32) for a in (hit.p, hit.normal, hit.eps, sample.wi))
+        survival = None if survival is None else np.ascontiguousarray(survival, np.float64)
+        lanes.beta, alive, lanes.origin = _native.scatter_step(beta, weight, survival, u, *geometry)
         if "q" in lanes.fields:
             lanes.q = self.mis_survival(hit) if q_mis is None else q_mis
         lanes.pdf, lanes.delta, lanes.direction = sample.pdf, sample.delta, sample.wi
