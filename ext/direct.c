@@ -22,8 +22,9 @@
  * The MIS weight is pathspace.mis.mis_weight's, ratio-based: w = 1 / (1 + r) with r = p_other / p_own
  * (power: r^beta), 0/0 -> 0 and inf/inf -> 1/2.  Every value is computed in the operations and order of the
  * NumPy code the tests keep as the reference (tests/estimators/test_next_event_kernel.py and
- * test_emission_kernel.py), bit for bit (an exponent other than 2 goes through C's pow, NumPy's through its
- * own: equal to within an ulp).
+ * test_emission_kernel.py), bit for bit, with two exceptions: an exponent other than 2 goes through C's pow
+ * (NumPy's own power agrees to within an ulp), and a light sample counts as useful when any channel of
+ * f |cos| is positive, where the NumPy code read only the first three of spectral rendering's four.
  */
 #include "native.h"
 
@@ -72,22 +73,17 @@ PyObject *ps_next_event_value(PyObject *module, PyObject *args)
                                        "3 (uniform), got %d", heuristic);
         return NULL;
     }
-    PyArrayObject *beta = (PyArrayObject *)ps_checked_array(objs[0], "beta", NPY_DOUBLE, -1, "float64", 2);
-    PyArrayObject *f_cos = beta ? (PyArrayObject *)ps_checked_array(objs[1], "f_cos", NPY_DOUBLE, -1, "float64", 2)
-                                : NULL;
-    PyArrayObject *le = f_cos ? (PyArrayObject *)ps_checked_array(objs[2], "le", NPY_DOUBLE, -1, "float64", 2)
-                              : NULL;
-    PyArrayObject *pdf_light = le ? (PyArrayObject *)ps_checked_array(objs[3], "pdf_light", NPY_DOUBLE, -1,
-                                                                      "float64", 1) : NULL;
-    PyArrayObject *pdf_bsdf = pdf_light ? (PyArrayObject *)ps_checked_array(objs[4], "pdf_bsdf", NPY_DOUBLE, -1,
-                                                                            "float64", 1) : NULL;
-    PyArrayObject *facing = pdf_bsdf ? (PyArrayObject *)ps_checked_array(objs[5], "facing", NPY_BOOL, -1, "bool", 1)
-                                     : NULL;
-    PyArrayObject *delta = NULL;
-    if (facing && objs[6] != Py_None)
-        delta = (PyArrayObject *)ps_checked_array(objs[6], "delta", NPY_BOOL, -1, "bool", 1);
-    if (!facing || (objs[6] != Py_None && !delta))
+    static const PsArraySpec specs[7] = {
+        {"beta", NPY_DOUBLE, "float64", 2, 0},     {"f_cos", NPY_DOUBLE, "float64", 2, 0},
+        {"le", NPY_DOUBLE, "float64", 2, 0},       {"pdf_light", NPY_DOUBLE, "float64", 1, 0},
+        {"pdf_bsdf", NPY_DOUBLE, "float64", 1, 0}, {"facing", NPY_BOOL, "bool", 1, 0},
+        {"delta", NPY_BOOL, "bool", 1, 1},
+    };
+    PyArrayObject *a[7];
+    if (ps_checked_arrays(objs, specs, 7, (PyObject **)a) < 0)
         return NULL;
+    PyArrayObject *beta = a[0], *f_cos = a[1], *le = a[2], *pdf_light = a[3], *pdf_bsdf = a[4], *facing = a[5],
+                  *delta = a[6];
     npy_intp channels = PyArray_DIM(beta, 0), n = PyArray_DIM(beta, 1);
     if (channels < 1 || PyArray_DIM(f_cos, 0) != channels || PyArray_DIM(le, 0) != channels ||
         PyArray_DIM(f_cos, 1) != n || PyArray_DIM(le, 1) != n || PyArray_DIM(pdf_light, 0) != n ||
@@ -127,17 +123,18 @@ PyObject *ps_next_event_value(PyObject *module, PyObject *args)
     return Py_BuildValue("(NN)", out[0], out[1]);
 }
 
-/* The emitting-triangle index of the triangle each of prim's n entries hit (-1: none), or -2 at the first prim
- * outside 0 .. triangles - 1 (written to *bad). */
+/* The emitting-triangle index of the triangle prim[i] (-1: none, or prim[i] is outside 0 .. triangles - 1, in
+ * which case *bad becomes i if it is still negative).  Each prim is read once. */
 static npy_intp emitter_of(const int32_t *prim, const int64_t *emitter_of_triangle, npy_intp triangles, npy_intp i,
                            npy_intp *bad)
 {
-    if (prim[i] < 0 || prim[i] >= triangles) {
+    int32_t triangle = prim[i];
+    if (triangle < 0 || triangle >= triangles) {
         if (*bad < 0)
             *bad = i;
         return -1;
     }
-    return (npy_intp)emitter_of_triangle[prim[i]];
+    return (npy_intp)emitter_of_triangle[triangle];
 }
 
 PyObject *ps_area_emission(PyObject *module, PyObject *args)
@@ -155,17 +152,17 @@ PyObject *ps_area_emission(PyObject *module, PyObject *args)
                                        "(uniform) or 4 (light samples only), got %d", strategy);
         return NULL;
     }
-    static const char *names[12] = {"prim", "emitter_of_triangle", "table", "area", "two_sided", "pmf", "origin",
-                                    "p", "normal", "direction", "pdf_prev", "delta_prev"};
-    static const int types[12] = {NPY_INT32, NPY_INT64, NPY_FLOAT, NPY_DOUBLE, NPY_BOOL, NPY_DOUBLE, NPY_FLOAT,
-                                  NPY_FLOAT, NPY_FLOAT, NPY_FLOAT, NPY_DOUBLE, NPY_BOOL};
-    static const char *type_names[12] = {"int32", "int64", "float32", "float64", "bool", "float64", "float32",
-                                         "float32", "float32", "float32", "float64", "bool"};
-    static const int ndims[12] = {1, 1, 2, 1, 1, 1, 2, 2, 2, 2, 1, 1};
+    static const PsArraySpec specs[12] = {
+        {"prim", NPY_INT32, "int32", 1, 0},      {"emitter_of_triangle", NPY_INT64, "int64", 1, 0},
+        {"table", NPY_FLOAT, "float32", 2, 0},   {"area", NPY_DOUBLE, "float64", 1, 0},
+        {"two_sided", NPY_BOOL, "bool", 1, 0},   {"pmf", NPY_DOUBLE, "float64", 1, 0},
+        {"origin", NPY_FLOAT, "float32", 2, 0},  {"p", NPY_FLOAT, "float32", 2, 0},
+        {"normal", NPY_FLOAT, "float32", 2, 0},  {"direction", NPY_FLOAT, "float32", 2, 0},
+        {"pdf_prev", NPY_DOUBLE, "float64", 1, 0}, {"delta_prev", NPY_BOOL, "bool", 1, 0},
+    };
     PyArrayObject *a[12];
-    for (int k = 0; k < 12; ++k)
-        if (!(a[k] = (PyArrayObject *)ps_checked_array(objs[k], names[k], types[k], -1, type_names[k], ndims[k])))
-            return NULL;
+    if (ps_checked_arrays(objs, specs, 12, (PyObject **)a) < 0)
+        return NULL;
     npy_intp n = PyArray_DIM(a[0], 0), triangles = PyArray_DIM(a[1], 0), emitters = PyArray_DIM(a[2], 1);
     int agree = PyArray_DIM(a[2], 0) == TABLE_ROWS && PyArray_DIM(a[3], 0) == emitters &&
                 PyArray_DIM(a[4], 0) == emitters && PyArray_DIM(a[5], 0) >= emitters &&
@@ -209,11 +206,11 @@ PyObject *ps_area_emission(PyObject *module, PyObject *args)
     int64_t *lanes = (int64_t *)PyArray_DATA((PyArrayObject *)out[0]),
             *emitter = (int64_t *)PyArray_DATA((PyArrayObject *)out[1]);
     double *weight = (double *)PyArray_DATA((PyArrayObject *)out[2]);
-    Py_BEGIN_ALLOW_THREADS
     npy_intp m = 0;
+    Py_BEGIN_ALLOW_THREADS
     for (npy_intp i = 0; i < n && m < count; ++i) {
         npy_intp e = emitter_of(prim, emitter_of_triangle, triangles, i, &bad);
-        if (e < 0)
+        if (e < 0 || e >= emitters)   /* checked above, but the arrays may have changed since: read once here */
             continue;
         float cos_view = (normal[i] * -direction[i] + normal[n + i] * -direction[n + i]) +
                          normal[2 * n + i] * -direction[2 * n + i];
@@ -237,5 +234,11 @@ PyObject *ps_area_emission(PyObject *module, PyObject *args)
         ++m;
     }
     Py_END_ALLOW_THREADS
+    if (m != count) {
+        for (int k = 0; k < 3; ++k)
+            Py_DECREF(out[k]);
+        PyErr_SetString(PyExc_RuntimeError, "area_emission: prim or emitter_of_triangle changed during the call");
+        return NULL;
+    }
     return Py_BuildValue("(NNN)", out[0], out[1], out[2]);
 }

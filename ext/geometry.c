@@ -32,6 +32,19 @@ PyObject *ps_checked_array(PyObject *obj, const char *name, int type, int other,
     return obj;
 }
 
+int ps_checked_arrays(PyObject *const *objs, const PsArraySpec *specs, int count, PyObject **arrays)
+{
+    for (int k = 0; k < count; ++k) {
+        const PsArraySpec *spec = &specs[k];
+        arrays[k] = spec->optional && objs[k] == Py_None
+                        ? NULL
+                        : ps_checked_array(objs[k], spec->name, spec->type, -1, spec->type_name, spec->ndim);
+        if (!arrays[k] && !(spec->optional && objs[k] == Py_None))
+            return -1;
+    }
+    return 0;
+}
+
 PyObject *ps_rows_array(PyObject *obj, const char *name, int type, const char *type_name, Py_ssize_t rows)
 {
     PyArrayObject *a = (PyArrayObject *)obj;

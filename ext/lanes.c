@@ -2,7 +2,9 @@
  * Compaction of a wavefront's lanes (pathspace.estimators.wavefront.Lanes.keep): the columns `indices` of every
  * per-lane array (lanes along the last axis), in one call with the GIL released, array by array and row by row
  * as numpy.take(a, indices, axis=-1) gathers them, into new arrays of the same types.  Arrays this loop does not
- * handle (not C-contiguous and aligned, more than two dimensions) go through NumPy's own take.
+ * handle (not C-contiguous and aligned, more than two dimensions, not of a bool or numeric type) go through
+ * NumPy's own take.  The indices (0 .. N - 1; no negative ones) are copied and checked once, so an array changed
+ * by another thread during the call cannot send the reads out of bounds.
  */
 #include "native.h"
 
@@ -57,15 +59,16 @@ PyObject *ps_take_lanes(PyObject *module, PyObject *args)
     if (!index)
         return NULL;
     npy_intp k = PyArray_DIM(index, 0);
-    const int64_t *indices = (const int64_t *)PyArray_DATA(index);
     Py_ssize_t count = PyList_GET_SIZE(arrays);
     PyObject *out = PyList_New(count);
     if (out && count == 0)
         return out;
     Gather *gathers = PyMem_Calloc(count ? (size_t)count : 1, sizeof(Gather));
-    if (!out || !gathers) {
+    int64_t *indices = PyMem_Malloc(k ? (size_t)k * sizeof(int64_t) : 1);
+    if (!out || !gathers || !indices) {
         Py_XDECREF(out);
         PyMem_Free(gathers);
+        PyMem_Free(indices);
         return PyErr_NoMemory();
     }
     npy_intp width = -1, loops = 0;
@@ -84,8 +87,9 @@ PyObject *ps_take_lanes(PyObject *module, PyObject *args)
             goto fail;
         }
         width = lanes;
-        if (ndim > 2 || !PyArray_IS_C_CONTIGUOUS(array) || !PyArray_ISALIGNED(array) ||
-            PyDataType_REFCHK(PyArray_DESCR(array))) {
+        int numeric = PyTypeNum_ISBOOL(PyArray_TYPE(array)) || PyTypeNum_ISNUMBER(PyArray_TYPE(array));
+        if (ndim > 2 || !numeric || !PyArray_IS_C_CONTIGUOUS(array) || !PyArray_ISALIGNED(array) ||
+            !PyArray_ISNOTSWAPPED(array)) {
             PyObject *taken = PyArray_TakeFrom(array, index_obj, ndim - 1, NULL, NPY_RAISE);
             if (!taken)
                 goto fail;
@@ -104,6 +108,8 @@ PyObject *ps_take_lanes(PyObject *module, PyObject *args)
     }
     npy_intp bad = -1;
     Py_BEGIN_ALLOW_THREADS
+    if (k > 0)
+        memcpy(indices, PyArray_DATA(index), (size_t)k * sizeof(int64_t));
     for (npy_intp i = 0; i < k && bad < 0; ++i)
         if (indices[i] < 0 || indices[i] >= width)
             bad = i;
@@ -117,9 +123,11 @@ PyObject *ps_take_lanes(PyObject *module, PyObject *args)
         goto fail;
     }
     PyMem_Free(gathers);
+    PyMem_Free(indices);
     return out;
 fail:
     Py_DECREF(out);
     PyMem_Free(gathers);
+    PyMem_Free(indices);
     return NULL;
 }

@@ -34,6 +34,20 @@ PyObject *ps_hit_geometry(PyObject *module, PyObject *args);
  * `name` (geometry.c). */
 PyObject *ps_checked_array(PyObject *obj, const char *name, int type, int other, const char *type_name, int ndim);
 
+/* One argument array of a kernel: its name, NPY_ type number and name, dimensions, and whether None may stand
+ * for it. */
+typedef struct {
+    const char *name;
+    int type;
+    const char *type_name;
+    int ndim;
+    int optional;
+} PsArraySpec;
+
+/* arrays[k] = objs[k] (borrowed) checked as ps_checked_array checks it against specs[k] (NULL for None where
+ * the spec is optional), for k < count; 0, or -1 with the error of the first that fails (geometry.c). */
+int ps_checked_arrays(PyObject *const *objs, const PsArraySpec *specs, int count, PyObject **arrays);
+
 /* obj (borrowed) if it is a 2D NumPy array of type `type` with `rows` rows, native byte order and aligned, whose
  * rows are contiguous (any stride between them: a range of columns of a wider array); else NULL with a
  * TypeError or ValueError naming `name` (geometry.c). */

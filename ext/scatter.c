@@ -26,22 +26,17 @@ PyObject *ps_scatter_step(PyObject *module, PyObject *args)
     if (!PyArg_ParseTuple(args, "OOOOOOOO:scatter_step", &objs[0], &objs[1], &objs[2], &objs[3], &objs[4],
                           &objs[5], &objs[6], &objs[7]))
         return NULL;
-    PyArrayObject *beta = (PyArrayObject *)ps_checked_array(objs[0], "beta", NPY_DOUBLE, -1, "float64", 2);
-    PyArrayObject *weight = beta ? (PyArrayObject *)ps_checked_array(objs[1], "weight", NPY_DOUBLE, -1, "float64", 2)
-                                 : NULL;
-    PyArrayObject *survival = NULL;
-    if (weight && objs[2] != Py_None)
-        survival = (PyArrayObject *)ps_checked_array(objs[2], "survival", NPY_DOUBLE, -1, "float64", 1);
-    int ok = weight && (objs[2] == Py_None || survival);
-    PyArrayObject *u = ok ? (PyArrayObject *)ps_checked_array(objs[3], "u", NPY_DOUBLE, -1, "float64", 1) : NULL;
-    PyArrayObject *p = u ? (PyArrayObject *)ps_checked_array(objs[4], "p", NPY_FLOAT, -1, "float32", 2) : NULL;
-    PyArrayObject *normal = p ? (PyArrayObject *)ps_checked_array(objs[5], "normal", NPY_FLOAT, -1, "float32", 2)
-                              : NULL;
-    PyArrayObject *eps = normal ? (PyArrayObject *)ps_checked_array(objs[6], "eps", NPY_FLOAT, -1, "float32", 1)
-                                : NULL;
-    PyArrayObject *wi = eps ? (PyArrayObject *)ps_checked_array(objs[7], "wi", NPY_FLOAT, -1, "float32", 2) : NULL;
-    if (!wi)
+    static const PsArraySpec specs[8] = {
+        {"beta", NPY_DOUBLE, "float64", 2, 0},   {"weight", NPY_DOUBLE, "float64", 2, 0},
+        {"survival", NPY_DOUBLE, "float64", 1, 1}, {"u", NPY_DOUBLE, "float64", 1, 0},
+        {"p", NPY_FLOAT, "float32", 2, 0},       {"normal", NPY_FLOAT, "float32", 2, 0},
+        {"eps", NPY_FLOAT, "float32", 1, 0},     {"wi", NPY_FLOAT, "float32", 2, 0},
+    };
+    PyArrayObject *a[8];
+    if (ps_checked_arrays(objs, specs, 8, (PyObject **)a) < 0)
         return NULL;
+    PyArrayObject *beta = a[0], *weight = a[1], *survival = a[2], *u = a[3], *p = a[4], *normal = a[5], *eps = a[6],
+                  *wi = a[7];
     npy_intp channels = PyArray_DIM(beta, 0), n = PyArray_DIM(beta, 1);
     if (channels < 1 || PyArray_DIM(weight, 0) != channels || PyArray_DIM(weight, 1) != n ||
         (survival && PyArray_DIM(survival, 0) != n) || PyArray_DIM(u, 0) != n || PyArray_DIM(eps, 0) != n ||

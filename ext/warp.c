@@ -22,15 +22,14 @@ PyObject *ps_cosine_about(PyObject *module, PyObject *args)
     PyObject *objs[4];
     if (!PyArg_ParseTuple(args, "OOOO:cosine_about", &objs[0], &objs[1], &objs[2], &objs[3]))
         return NULL;
-    PyArrayObject *normal = (PyArrayObject *)ps_checked_array(objs[0], "n", NPY_FLOAT, -1, "float32", 2);
-    PyArrayObject *u0 = normal ? (PyArrayObject *)ps_checked_array(objs[1], "u0", NPY_DOUBLE, -1, "float64", 1)
-                               : NULL;
-    PyArrayObject *cos_phi = u0 ? (PyArrayObject *)ps_checked_array(objs[2], "cos_phi", NPY_FLOAT, -1, "float32", 1)
-                                : NULL;
-    PyArrayObject *sin_phi = cos_phi ? (PyArrayObject *)ps_checked_array(objs[3], "sin_phi", NPY_FLOAT, -1,
-                                                                         "float32", 1) : NULL;
-    if (!sin_phi)
+    static const PsArraySpec specs[4] = {
+        {"n", NPY_FLOAT, "float32", 2, 0},       {"u0", NPY_DOUBLE, "float64", 1, 0},
+        {"cos_phi", NPY_FLOAT, "float32", 1, 0}, {"sin_phi", NPY_FLOAT, "float32", 1, 0},
+    };
+    PyArrayObject *a[4];
+    if (ps_checked_arrays(objs, specs, 4, (PyObject **)a) < 0)
         return NULL;
+    PyArrayObject *normal = a[0], *u0 = a[1], *cos_phi = a[2], *sin_phi = a[3];
     npy_intp n = PyArray_DIM(normal, 1);
     if (PyArray_DIM(normal, 0) != 3 || PyArray_DIM(u0, 0) != n || PyArray_DIM(cos_phi, 0) != n ||
         PyArray_DIM(sin_phi, 0) != n) {

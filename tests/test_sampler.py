@@ -15,6 +15,26 @@ from pathspace.sampler import (RecordingSamplers, ReplaySampler, ReplaySamplers,
 from conftest import scene_dict
 
 
+def test_a_stream_samplers_lanes_stay_in_segment_order():
+    """Lanes keep the order of their segments through any keep, split and extend, so that the lanes per
+    segment are counted by binary search (``StreamSampler._counts``): checked against bincount."""
+    rng = np.random.default_rng(2)
+    sampler = StreamSampler(1, [(0, k) for k in range(12)], rng.integers(0, 40, 12))
+    for step in range(300):
+        action = rng.integers(0, 3)
+        if action == 0 and sampler.lanes:
+            sampler.keep(np.flatnonzero(rng.random(sampler.lanes) < 0.8))
+        elif action == 1 and sampler.lanes:
+            part = sampler.split(np.flatnonzero(rng.random(sampler.lanes) < 0.3))
+            assert np.all(np.diff(part.unit) >= 0)
+            np.testing.assert_array_equal(part.counts, np.bincount(part.unit, minlength=len(part.generators)))
+        else:
+            sampler.extend(StreamSampler(1, [(1 + step, k) for k in range(3)], rng.integers(0, 30, 3)))
+        assert np.all(np.diff(sampler.unit) >= 0)
+        np.testing.assert_array_equal(sampler.counts, np.bincount(sampler.unit, minlength=len(sampler.generators)))
+        assert sampler.draw(1).shape == (1, sampler.lanes)
+
+
 def test_a_units_numbers_do_not_depend_on_its_company():
     """Lanes of unit (3, 1) draw the same numbers alone, beside other units, and after others leave."""
     alone = StreamSampler(7, [(3, 1)], [5])

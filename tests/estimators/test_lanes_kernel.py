@@ -3,7 +3,8 @@
 ``Lanes.keep``, ``Walk.keep`` and ``Arrival.keep`` gather the lanes they keep with ``take_lanes``: NumPy's
 ``take(a, indices, axis=-1)`` of every array in one call.  Compared on every per-lane type (bool, int32,
 int64, float32, float64, complex), one and two dimensions, arrays the loop does not handle (views with strides,
-three dimensions, objects: NumPy's take does those), repeated and empty index lists; then its refusals.
+three dimensions, objects, byte-swapped: NumPy's take does those), repeated and empty index lists; then its
+refusals.
 """
 from __future__ import annotations
 
@@ -19,7 +20,7 @@ def arrays(rng: np.random.Generator, n: int) -> list[np.ndarray]:
     return [rng.random(n) < 0.5, rng.integers(-5, 5, n, dtype=np.int32), rng.integers(0, 1 << 40, n),
             rng.random((3, n)).astype(np.float32), rng.random((4, n)), rng.random((2, n)) + 1j * rng.random((2, n)),
             wide[:, ::2], np.asfortranarray(rng.random((3, n))), rng.random((2, 3, n)),
-            np.array([object()] * n, dtype=object)]
+            np.array([object()] * n, dtype=object), rng.random(n).astype(">f8"), rng.random((1, n))]
 
 
 @pytest.mark.parametrize("pick", ["some", "all", "none", "repeated"])
@@ -67,6 +68,9 @@ def test_take_lanes_refuses_bad_arguments():
         _native.take_lanes(np.array([0]), [a, b])
     with pytest.raises(TypeError, match="indices must be a 1D int64"):
         _native.take_lanes(np.array([0], np.int32), [a])
+    with pytest.raises(TypeError, match="Cannot cast"):
+        take_lanes(np.array([0.5]), a)                       # np.take refuses float indices too
+    np.testing.assert_array_equal(take_lanes(np.array([2, 0], np.int32), a)[0], a[[2, 0]])
     with pytest.raises(TypeError, match="is not a NumPy array"):
         _native.take_lanes(np.array([0]), [a, [1.0]])
     with pytest.raises(TypeError):

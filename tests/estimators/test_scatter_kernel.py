@@ -3,8 +3,8 @@
 ``Walk.scatter`` takes the new throughput, the roulette's decision and the next ray's origin from
 ``_native.scatter_step``.  The reference below is the NumPy code it replaced.  Compared bit for bit on
 throughputs and weights over many decades with zeros, infinities and NaNs, survival probabilities of 0, 1 and
-in between (and none), normals and directions on both sides of the surface, grazing, and error bounds of
-zero and of large coordinates, for three and four channels; then the kernel's refusals.
+in between (and none) and NaN, NaN uniforms, normals and directions on both sides of the surface, grazing,
+and error bounds of zero and of large coordinates, for three and four channels; then the kernel's refusals.
 """
 from __future__ import annotations
 
@@ -42,7 +42,11 @@ def inputs(seed: int, channels: int, with_survival: bool, n: int = 5000):
         survival = rng.random(n)
         survival[rng.random(n) < 0.1] = 0.0
         survival[rng.random(n) < 0.3] = 1.0
+    beta[:, :30] = np.inf                                           # overflowed and undefined throughputs
+    beta[:, 30:40] = np.nan
     u = rng.random(n)
+    if with_survival:
+        survival[40:45], u[45:50] = np.nan, np.nan                  # NaN decides nothing: the lane dies
     p = (rng.normal(size=(3, n)) * 10.0 ** rng.integers(-3, 6, n)).astype(np.float32)
     normal, wi = unit(rng, n), unit(rng, n)
     wi[:, :200] = np.cross(normal[:, :200].T, wi[:, :200].T).T    # grazing: perpendicular to the normal

@@ -50,8 +50,8 @@ class ItemBook:
             if hi > lo:
                 where = tickets[lo:hi] - first
                 item = self.values[j]
-                for c in range(self.channels):   # put releases the GIL; a fancy-indexed assignment would not
-                    item[c].put(where, values[c, lo:hi])
+                for c in range(self.channels):   # put released the GIL in a two-thread test; item[:, where] = ...
+                    item[c].put(where, values[c, lo:hi])   # held it
                 self.remaining[j] -= hi - lo
 
     def finished(self) -> list[tuple[object, np.ndarray]]:
@@ -66,8 +66,10 @@ class ItemBook:
 
 def take_lanes(indices: np.ndarray, *arrays: np.ndarray) -> list[np.ndarray]:
     """``np.take(a, indices, axis=-1)`` of every array (lanes along the last axis), in one C call that releases
-    the GIL (``ext/lanes.c``): a wavefront's compaction, every bounce."""
-    return _native.take_lanes(np.ascontiguousarray(indices, np.int64), list(arrays))
+    the GIL (``ext/lanes.c``): a wavefront's compaction, every bounce.  ``indices``: integers in 0 .. N - 1
+    (unlike ``np.take``, no negative ones: IndexError)."""
+    indices = np.ascontiguousarray(indices).astype(np.int64, casting="safe", copy=False)
+    return _native.take_lanes(indices, list(arrays))
 
 
 class Lanes:
