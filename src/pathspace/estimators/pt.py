@@ -359,7 +359,7 @@ class PathTracer(Estimator):
         emits = np.flatnonzero(entity >= 0)
         entity = entity.take(emits)
         normal, wo = np.take(arrival.normal, emits, axis=1), -np.take(lanes.direction, emits, axis=1)
-        facing = lights.area.two_sided.take(entity) | (dot(normal, wo) > 0)
+        facing = lights.area.faces(entity, dot(normal, wo))
         pdf_light = None
         if bounce.strategy == "mis":
             pdf_light = lights.pdf_li(entity, np.take(lanes.origin, emits, axis=1), np.take(arrival.p, emits, axis=1),

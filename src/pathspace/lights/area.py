@@ -83,7 +83,7 @@ class AreaLight(Light):
     def sample_li(tables: "AreaTables", idx, receivers, u, colours, measure: str) -> LightSample:
         """Points on the triangles ``idx`` for receivers (3, N), by area or by solid angle."""
         point, normal, wi, distance, cos_light, pdf = tables.sample(idx, receivers, u, measure)
-        facing = tables.two_sided.take(idx) | (cos_light > 0)
+        facing = tables.faces(idx, cos_light)
         return LightSample(wi, distance, point, normal, tables.radiance_of(idx, colours), facing, pdf,
                            np.zeros(pdf.shape, dtype=bool), tables.table[12].take(idx))
 
@@ -234,10 +234,14 @@ class AreaTables:
         """Radiance (C, N) of emitting triangles ``emitter`` (on their emitting sides)."""
         return colours.lookup(self.radiance, self.light_of.take(emitter))
 
+    def faces(self, emitter: np.ndarray, cos_light: np.ndarray) -> np.ndarray:
+        """Whether triangles ``emitter`` emit toward viewers at dot(n, w_view) = ``cos_light`` (N,): two-sided
+        lights everywhere, one-sided ones in front."""
+        return self.two_sided.take(emitter) | (cos_light > 0)
+
     def emitted(self, emitter: np.ndarray, cos_light: np.ndarray, colours) -> np.ndarray:
         """Radiance (C, N) leaving triangles ``emitter`` toward viewers at dot(n, w_view) = ``cos_light``."""
-        facing = self.two_sided.take(emitter) | (cos_light > 0)
-        return self.radiance_of(emitter, colours) * facing
+        return self.radiance_of(emitter, colours) * self.faces(emitter, cos_light)
 
 
 def _spherical(omega: np.ndarray) -> np.ndarray:
