@@ -8,7 +8,9 @@ Per scene (the diffuse Cornell box and its glass-and-mirror variant, 256x256):
    libLLVM, e.g. the ``libllvm19`` system package; the variant used is printed) on the same scene, exported
    with :func:`pathspace.scene.mitsuba_export.mitsuba_dict`, at the spp that takes about as long;
    time to relMSE ``--target`` = seconds x relMSE / target (relMSE falls as 1 / time), and the ratios
-   within the repeat: pt / Mitsuba, bdpt / pt, lt / pt
+   within the repeat: pt / Mitsuba, bdpt / pt, lt / pt; and pt again with ``[render] traversal = "fast"``
+   (Embree without its robust mode, as Mitsuba builds it: see :class:`pathspace.accel.Accel`), against
+   Mitsuba (skip it with ``--no-fast``)
    (goals: pt <= 1.0x Mitsuba on the diffuse box and <= 1.5x on the specular one; bdpt <= 1.3x pt on
    the diffuse box and <= 0.3x on the specular one; lt <= 1.5x pt on the diffuse box).
 On the diffuse box:
@@ -28,6 +30,7 @@ from __future__ import annotations
 
 import argparse
 import cProfile
+import dataclasses
 import pstats
 import statistics
 import sys
@@ -108,15 +111,19 @@ def time_to_target(scene_name: str, args) -> None:
         print(f"  Mitsuba {mitsuba.mi.__version__} {mitsuba.variant}: {mitsuba.spp} spp per render")
     except ImportError:
         print("  Mitsuba 3 not installed (pip install mitsuba): its column is left out")
-    ratios: dict[str, list[float]] = {"pt / mitsuba": [], "bdpt / pt": [], "lt / pt": []}
+    runs = [(estimator, estimator, scene) for estimator in ESTIMATORS]
+    if args.fast:
+        runs.append(("pt-fast", "pt", dataclasses.replace(scene, traversal="fast")))
+        ps.render(runs[-1][2], "pt", spp=1, seed=0, threads=args.threads)
+    ratios: dict[str, list[float]] = {"pt / mitsuba": [], "pt-fast / mitsuba": [], "bdpt / pt": [], "lt / pt": []}
     for repeat in range(args.repeats):
         seconds = {}
-        for estimator in ESTIMATORS:
-            result = ps.render(scene, estimator, time=args.time, seed=100 + repeat, threads=args.threads)
+        for name, estimator, rendered in runs:
+            result = ps.render(rendered, estimator, time=args.time, seed=100 + repeat, threads=args.threads)
             stats, error = result.stats, rel_mse(result, reference)
-            seconds[estimator] = stats["seconds"] * error / TARGET
-            print(f"  run {repeat + 1} {estimator:4s}: {stats['spp']:5d} spp in {stats['seconds']:5.1f} s, "
-                  f"relMSE {error:.3e} -> {seconds[estimator]:7.1f} s to {TARGET:g}")
+            seconds[name] = stats["seconds"] * error / TARGET
+            print(f"  run {repeat + 1} {name:7s}: {stats['spp']:5d} spp in {stats['seconds']:5.1f} s, "
+                  f"relMSE {error:.3e} -> {seconds[name]:7.1f} s to {TARGET:g}")
         if mitsuba is not None:
             image, took = mitsuba.render(seed=100 + repeat)
             error = ps.metrics.relmse(image, reference.image) - reference_floor(reference)
@@ -124,6 +131,8 @@ def time_to_target(scene_name: str, args) -> None:
             print(f"  run {repeat + 1} mitsuba: {mitsuba.spp:5d} spp in {took:5.1f} s, relMSE {error:.3e} -> "
                   f"{seconds['mitsuba']:7.1f} s to {TARGET:g}")
             ratios["pt / mitsuba"].append(seconds["pt"] / seconds["mitsuba"])
+            if args.fast:
+                ratios["pt-fast / mitsuba"].append(seconds["pt-fast"] / seconds["mitsuba"])
         ratios["bdpt / pt"].append(seconds["bdpt"] / seconds["pt"])
         ratios["lt / pt"].append(seconds["lt"] / seconds["pt"])
     for name, values in ratios.items():
@@ -243,6 +252,8 @@ def main(argv=None) -> None:
     parser.add_argument("--scaling-spp", type=int, default=16)
     parser.add_argument("--scenes", default="cornell-box,cornell-box-specular")
     parser.add_argument("--threads", type=int, default=None)
+    parser.add_argument("--no-fast", dest="fast", action="store_false",
+                        help="leave out pt with the fast (non-watertight) traversal")
     parser.add_argument("--only", default="target,scaling,shares,memory",
                         help="which parts to run (comma-separated)")
     args = parser.parse_args(argv)

@@ -83,7 +83,7 @@ struct RTCRayHit {
     struct RTCHit hit;
 };
 
-/* Function table filled by dlsym (the extension loads all but rtcIntersect1 and rtcOccluded16,
+/* Function table filled by dlsym (the extension loads all but rtcIntersect1 and rtcOccluded1,
  * which only the benchmark's plain loop uses).  Argument structs are passed as NULL (Embree then
  * uses its defaults: incoherent rays, all features). */
 typedef struct EmbreeAPI {

@@ -92,7 +92,7 @@ PyObject *ps_load_embree(PyObject *module, PyObject *args)
     LOAD_SYMBOL(rtcAttachGeometry);
     LOAD_SYMBOL(rtcReleaseGeometry);
     LOAD_SYMBOL(rtcIntersect16);
-    LOAD_SYMBOL(rtcOccluded1);
+    LOAD_SYMBOL(rtcOccluded16);
 
     RTCDevice device = api.rtcNewDevice(config);
     if (device == NULL) {

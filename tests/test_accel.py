@@ -6,7 +6,9 @@ import pytest
 from embreex import rtcore_scene
 from embreex.mesh_construction import TriangleMesh
 
+import pathspace as ps
 from pathspace import Accel
+from conftest import ROOT
 
 
 def embreex_run(vertices, indices, origins, directions, query="INTERSECT"):
@@ -157,3 +159,63 @@ def test_missing_embreex_is_reported_plainly(monkeypatch):
     monkeypatch.setattr(importlib.metadata, "files", no_package)
     with pytest.raises(ImportError, match="bundled in the 'embreex' wheel, which is not installed"):
         accel.embree_library_path()
+
+
+def edge_aimed_rays(vertices, indices, rng, n):
+    """Rays from inside a closed mesh's bounds toward points on its triangles' edges (a tenth at vertices)."""
+    vertices = vertices.astype(np.float64)
+    triangle, corner = rng.integers(0, len(indices), n), rng.integers(0, 3, n)
+    a, b = vertices[indices[triangle, corner]], vertices[indices[triangle, (corner + 1) % 3]]
+    along = np.where(rng.random(n) < 0.1, 0.0, rng.random(n))[:, None]
+    lo, hi = vertices.min(axis=0), vertices.max(axis=0)
+    origins = lo + (hi - lo) * rng.uniform(0.05, 0.95, (n, 3))
+    directions = a + along * (b - a) - origins
+    return np.ascontiguousarray(origins.T, np.float32), np.ascontiguousarray(directions.T, np.float32)
+
+
+def test_watertight_build_lets_no_ray_through_the_edges_of_a_closed_box():
+    scene = ps.load_scene(ROOT / "scenes" / "furnace" / "scene.toml")   # a closed cube, 12 triangles
+    vertices = scene.mesh.vertices.astype(np.float32)
+    origins, directions = edge_aimed_rays(vertices, scene.mesh.indices, np.random.default_rng(4), 200_000)
+    watertight = Accel(vertices, scene.mesh.indices)
+    assert watertight.watertight and "watertight=True" in repr(watertight)
+    assert np.all(watertight.intersect(origins, directions).prim >= 0)
+    assert watertight.occluded(origins, directions).all()
+    # Without the robust build, Embree's faster arithmetic lets some of these rays slip through an edge: what
+    # the default guards against (README, Performance, has the rates on the shipped scenes).
+    fast = Accel(vertices, scene.mesh.indices, watertight=False)
+    assert not fast.watertight
+    assert np.count_nonzero(fast.intersect(origins, directions).prim < 0) > 0
+
+
+def test_fast_build_finds_the_watertight_hits_of_ordinary_rays(cornell):
+    rng = np.random.default_rng(5)
+    vertices = cornell.mesh.vertices.astype(np.float32)
+    origins = cornell.mesh.vertices.mean(axis=0) + rng.uniform(-0.9, 0.9, (200_000, 3))
+    origins, directions = origins.T.astype(np.float32), rng.normal(size=(3, 200_000)).astype(np.float32)
+    watertight = Accel(vertices, cornell.mesh.indices).intersect(origins, directions)
+    fast_accel = Accel(vertices, cornell.mesh.indices, watertight=False)
+    fast = fast_accel.intersect(origins, directions)
+    # The same surfaces at the same distances (where the box stands on the floor, coplanar triangles tie and
+    # either build may report either of them).
+    hit = watertight.prim >= 0
+    assert 0.7 < hit.mean() < 0.95   # the box is open toward the camera
+    np.testing.assert_array_equal(fast.prim >= 0, hit)
+    np.testing.assert_allclose(fast.t[hit], watertight.t[hit], rtol=1e-4)
+    assert np.count_nonzero(fast.prim != watertight.prim) < 1e-3 * hit.size
+    # Occlusion of the segments up to just before and just past the watertight hits.
+    for scale, expected in ((0.99, False), (1.01, True)):
+        tmax = np.where(hit, watertight.t * scale, 1.0).astype(np.float32)
+        assert np.all(fast_accel.occluded(origins, directions, 0.0, tmax)[hit] == expected)
+
+
+def test_fast_queries_leave_the_callers_floating_point_modes_alone():
+    # The fast build traces with denormals flushed to zero; the calling thread (threads=1 traces on it) must
+    # get its own modes back, or NumPy's arithmetic after a query would flush denormals too.
+    accel = Accel(np.eye(3, dtype=np.float32), np.array([[0, 1, 2]], np.uint32), watertight=False)
+    rays = np.ones((3, 5000), np.float32)
+    accel.intersect(-rays, rays, threads=1)
+    accel.occluded(-rays, rays, threads=1)
+    tiny = np.array([1e-38], np.float32)
+    assert (tiny / np.float32(1000))[0] > 0   # a denormal float32, not flushed
+    assert np.float64(1e-308) / 1e10 > 0

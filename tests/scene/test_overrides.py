@@ -1,6 +1,8 @@
 """Changing a scene at load time: dotted keys, list indices, shorthands, and errors that name the key."""
 from __future__ import annotations
 
+import dataclasses
+
 import pytest
 
 import pathspace as ps
@@ -32,3 +34,16 @@ def test_override_errors_name_the_key():
         ps.load_scene(CORNELL, **{"materials.white.reflectance": [2, 0, 0]})
     with pytest.raises(ps.SceneError, match="render.spp: expected an integer >= 1"):
         ps.load_scene(CORNELL, spp=0)
+
+
+def test_render_traversal_chooses_how_rays_are_traced():
+    fast = ps.load_scene(CORNELL, **{"render.traversal": "fast"})
+    assert fast.traversal == "fast" and not fast.accel.watertight and not fast.emitter_accel.watertight
+    assert "fast traversal" in fast.describe()
+    default = ps.load_scene(CORNELL)
+    assert default.traversal == "watertight" and default.accel.watertight
+    assert dataclasses.replace(default, traversal="fast").accel.watertight is False
+    with pytest.raises(ps.SceneError, match="render.traversal: .*'watertight', 'fast'.*'quick'"):
+        ps.load_scene(CORNELL, **{"render.traversal": "quick"})
+    with pytest.raises(ValueError, match="traversal: expected one of watertight, fast, got 'quick'"):
+        dataclasses.replace(default, traversal="quick")

@@ -25,7 +25,7 @@ from ..fields import MAX_COORDINATE, Fields, SceneError
 from ..lights import LIGHTS, AreaLight, LightSet
 from . import shapes as builtin
 from .mesh import TriangleMesh, triangle_cross
-from .model import Scene
+from .model import TRAVERSALS, Scene
 from .overrides import apply_overrides
 from .shapes import SHAPES
 
@@ -85,6 +85,7 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>", base_dir
     top.string("description", "")
     render = top.sub("render", {})
     render_spp = render.integer("spp", None, low=1) if render.has("spp") else None
+    traversal = render.string("traversal", "watertight", choices=TRAVERSALS)
     camera = _model(top.sub("camera"), CAMERAS, "pinhole")
     origin = _render_origin(render, camera)
     render.finish()
@@ -118,7 +119,8 @@ def scene_from_dict(data: dict[str, Any], source: str = "<scene dict>", base_dir
     light_set = LightSet(emitters + lights, mesh, scene_radius=scene_radius, disk_center=0.5 * (lo + hi),
                          disk_radius=0.5 * float(np.linalg.norm(hi - lo)))
     return Scene(camera=camera, mesh=mesh, materials=material_table, lights=light_set, shape_names=shape_names,
-                 source=source, render_spp=render_spp, fingerprint=fingerprint(data, top.files), origin=origin)
+                 source=source, render_spp=render_spp, fingerprint=fingerprint(data, top.files), origin=origin,
+                 traversal=traversal)
 
 
 def _check_extent(top: Fields, vertices: np.ndarray) -> None:
