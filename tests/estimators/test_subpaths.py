@@ -1,12 +1,22 @@
-"""Views of subpath vertices: what connections gather is the vertices' own data, however a view was narrowed."""
+"""Views of subpath vertices: what connections gather is the vertices' own data, however a view was narrowed; light
+vertices streamed to a light tracer are the vertices kept for BDPT."""
 from __future__ import annotations
 
 import dataclasses
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
-from pathspace.estimators.subpaths import FIELDS, Subpaths, Vertices
+import pathspace as ps
+from conftest import CORNELL
+from pathspace.estimators.base import Counters
+from pathspace.estimators.bidirectional import STREAMS, Bidirectional
+from pathspace.estimators.control import RenderControl
+from pathspace.estimators.lt import LightTracer
+from pathspace.estimators.subpaths import FIELDS, Subpaths, Vertices, light_subpaths, stream_light_vertices
+from pathspace.sampler import StreamSamplers
+from pathspace.spectra import RGBMode
 
 
 def test_narrowed_views_gather_the_vertices_own_fields():
@@ -34,3 +44,61 @@ def test_subpaths_know_where_they_are_specular():
     last = np.array([0, 1, 2, 1, 2, 3, -1, 0, 1])
     assert sub.any_specular(lane, 1, last).tolist() == [False, True, True, False, True, True, False, False, True]
     assert sub.any_specular(np.array([1, 1]), 3, np.array([3, 4])).tolist() == [False, False]
+
+
+def _light_walk_inputs(count: int):
+    scene = ps.load_scene(CORNELL)
+    lt = LightTracer()
+    samplers = {stream: StreamSamplers(9).open([(0, 0, code)], [count]) for stream, code in STREAMS.items()}
+    state, settings = lt._walk_settings(scene, RGBMode(), samplers, Counters(), RenderControl())
+    return scene, lt, settings, samplers["light"]
+
+
+def test_streamed_light_vertices_are_the_kept_ones():
+    count, chunk = 4096, 500
+    _, _, settings, sampler = _light_walk_inputs(count)
+    kept, _ = light_subpaths(settings, count, sampler, False)
+    _, _, settings, sampler = _light_walk_inputs(count)   # the same numbers again
+    calls = []
+    terminated = stream_light_vertices(settings, count, sampler, calls.append, chunk=chunk)
+    np.testing.assert_array_equal(terminated, kept.terminated)
+    assert calls[0].index.tolist() == [0] * count and calls[0].lane.tolist() == list(range(count))
+    sizes = [call.lane.size for call in calls[1:]]
+    assert len(sizes) > 2 and min(sizes[:-1]) >= chunk and max(sizes) < count   # later depths, joined in chunks
+    assert all(call.offset is None and call.fwd is None and call.rev is None for call in calls)  # no densities
+    lane, index = (np.concatenate([getattr(call, name) for call in calls]) for name in ("lane", "index"))
+    order = np.lexsort((index, lane))   # kept subpaths: lane after lane, by index
+    assert index.max() > 10
+    for name in ("lane", "index", "p", "n", "eps", "wo", "beta", "delta", "kind", "material", "entity",
+                 "infinite", "u"):
+        streamed = np.concatenate([getattr(call, name) for call in calls], axis=-1)
+        np.testing.assert_array_equal(np.take(streamed, order, axis=-1), getattr(kept, name), err_msg=name)
+
+
+def test_walks_with_densities_do_not_stream():
+    _, _, settings, sampler = _light_walk_inputs(64)
+    settings.densities = True
+    with pytest.raises(ValueError, match="walks that keep densities cannot stream"):
+        stream_light_vertices(settings, 64, sampler, lambda vertices: None)
+
+
+def test_the_light_tracer_makes_while_walking_the_connections_of_kept_subpaths():
+    count = 4096
+    scene = ps.load_scene(CORNELL)
+    lt = LightTracer()
+    made = []
+    for streamed in (True, False):
+        samplers = {stream: StreamSamplers(9).open([(0, 0, code)], [count]) for stream, code in STREAMS.items()}
+        args = (scene, RGBMode(), np.arange(count) % scene.camera.pixel_count, samplers, np.array([0, count]),
+                Counters(), RenderControl())
+        batch, _ = lt._subpaths(*args) if streamed else Bidirectional._subpaths(lt, *args)
+        assert (batch.made is not None) == streamed
+        parts = list(lt._contributions(batch))
+        assert len(parts) == (2 if streamed else 1)   # vertices 0, then the 4096 lanes' later vertices in one chunk
+        rows = {name: np.concatenate([getattr(part, name) for part in parts], axis=-1)
+                for name in ("lane", "s", "t", "value", "raster", "flags")}
+        order = np.lexsort((rows["s"], rows["lane"]))
+        made.append({name: np.take(value, order, axis=-1) for name, value in rows.items()} | {"rays": batch.rays})
+    assert made[0]["lane"].size > count
+    for name, value in made[0].items():
+        np.testing.assert_array_equal(value, made[1][name], err_msg=name)

@@ -201,10 +201,8 @@ class Bidirectional(Estimator):
         """The subpaths of lanes through ``pixels`` from ``samplers``' numbers, and the lanes' colour state
         (for ``chosen`` strategies, see :meth:`evaluate`)."""
         count = pixels.size
-        state = Lanes(mode.path_fields, **mode.start(samplers["wavelengths"].draw(mode.camera_dims)))
-        colours = mode.colours(state)
-        settings = SubpathSettings(scene, colours, {"diffuse_sampling": self.diffuse_sampling}, self.roulette,
-                                   self.light_roulette, self.depth_limit + 1, counters, control, self.uses_densities)
+        state, settings = self._walk_settings(scene, mode, samplers, counters, control)
+        colours = settings.colours
         s, t = chosen if chosen is not None else (None, None)
         eye = (camera_subpaths(settings, pixels, samplers["camera"], None if t is None else np.maximum(t, 1))
                if self.uses_camera_subpaths else None)
@@ -217,6 +215,15 @@ class Bidirectional(Estimator):
             mode.terminate_secondary(state, terminated)
         return Batch(scene, light, eye, hits if lens else None, colours, settings.options, self.depth_limit,
                      units, self.uses_densities, chosen=chosen), state
+
+    def _walk_settings(self, scene, mode, samplers: Mapping[str, Sampler], counters: Counters,
+                       control: RenderControl) -> tuple[Lanes, SubpathSettings]:
+        """The lanes' colour state (their wavelengths, from ``samplers``) and what their subpath walks share."""
+        state = Lanes(mode.path_fields, **mode.start(samplers["wavelengths"].draw(mode.camera_dims)))
+        settings = SubpathSettings(scene, mode.colours(state), {"diffuse_sampling": self.diffuse_sampling},
+                                   self.roulette, self.light_roulette, self.depth_limit + 1, counters, control,
+                                   self.uses_densities)
+        return state, settings
 
     def _weighted(self, part: Contributions, batch: Batch, pixels: np.ndarray):
         """(MIS weights (n,), weighted values (C, n), film pixel (n,), whether each is a splat (n,)) of ``part``'s

@@ -58,9 +58,12 @@ class Batch:
     rays: int = 0      # shadow rays traced
     nonfinite: int = 0  # contributions dropped because a channel or their weight was NaN or infinite
     chosen: tuple[np.ndarray, np.ndarray] | None = None   # (s, t) per lane: only that strategy (MMLT); None: all
+    lane_flags: np.ndarray | None = None  # (lanes,) the flags of each lane's light; None: from light's vertices 0
+    made: list["Contributions"] | None = None  # connections made while the subpaths were walked (light tracing)
 
     def __post_init__(self) -> None:
-        self.lane_flags = self.scene.lights.flags.take(self.light.entity.take(self.light.offset[:-1]))
+        if self.lane_flags is None:
+            self.lane_flags = self.scene.lights.flags.take(self.light.entity.take(self.light.offset[:-1]))
 
     def wanted(self, lane: np.ndarray, s, t) -> np.ndarray | bool:
         """Whether the strategies (s, t) of connections of ``lane`` are to be computed (all, unless ``chosen``)."""
@@ -178,9 +181,10 @@ def light_samples(batch: Batch) -> Contributions | None:
 
 # -- t = 1 -----------------------------------------------------------------------------------------
 
-def lens_samples(batch: Batch) -> Contributions | None:
-    """Light vertices y_{s-1} joined to a fresh point on the lens (light tracing), splatted."""
-    scene, light = batch.scene, batch.light
+def lens_samples(batch: Batch, light: Subpaths | None = None) -> Contributions | None:
+    """Light vertices y_{s-1} joined to a fresh point on the lens (light tracing), splatted: those of ``light``
+    (default: the batch's light subpaths)."""
+    scene, light = batch.scene, batch.light if light is None else light
     camera, lights = scene.camera, scene.lights
     # Lights seen directly: area lights only.  A point or spot light would land in a single pixel as
     # I / (d^2 x the pixel's solid angle); path tracing cannot see it, and neither image draws it.

@@ -6,7 +6,9 @@ on the lens and its contribution lands on the pixel it projects to.  Paths
 that reach the camera only through specular surfaces (a mirror seen by a
 pinhole camera, caustics seen through glass) cannot be formed, so those
 parts of the image stay black; everywhere else the estimate converges to
-the same image as path tracing.
+the same image as path tracing.  The light subpaths are joined to the camera
+depth by depth while they are walked, and their vertices are not kept
+(:func:`~pathspace.estimators.subpaths.stream_light_vertices`).
 
 Parameters: ``max_depth``, the roulette parameters, ``diffuse_sampling``
 and ``pyramid`` as for :mod:`pathspace.estimators.bdpt`.
@@ -19,6 +21,7 @@ import numpy as np
 
 from .bidirectional import Bidirectional
 from .connections import Batch, Contributions, lens_samples
+from .subpaths import Subpaths, stream_light_vertices
 
 __all__ = ["LightTracer"]
 
@@ -44,10 +47,38 @@ class LightTracer(Bidirectional):
             lines.append("environment seen directly: not formed (an infinite light cannot be joined to the camera)")
         return lines
 
+    def _subpaths(self, scene, mode, pixels, samplers, units, counters, control, chosen=None):
+        """The connections of light subpaths to the camera, made while the subpaths are walked (a batch that keeps
+        them in ``made``, and the light vertices 0 only), and the lanes' colour state."""
+        if chosen is not None:
+            return super()._subpaths(scene, mode, pixels, samplers, units, counters, control, chosen)
+        state, settings = self._walk_settings(scene, mode, samplers, counters, control)
+        batches: list[Batch] = []
+
+        def connect(vertices: Subpaths) -> None:
+            if not batches:  # the vertices 0, one per lane: the lanes' lights
+                batches.append(Batch(scene, vertices, None, None, settings.colours, settings.options,
+                                     self.depth_limit, units, densities=False,
+                                     lane_flags=scene.lights.flags.take(vertices.entity), made=[]))
+            batch = batches[0]
+            part = lens_samples(batch, vertices)
+            if part is not None:
+                batch.made.append(part)
+            if vertices.index.size:
+                counters.longest = max(counters.longest, int(vertices.index[-1]))
+
+        terminated = stream_light_vertices(settings, pixels.size, samplers["light"], connect)
+        if terminated.any():
+            mode.terminate_secondary(state, terminated)
+        return batches[0], state
+
     def _contributions(self, batch: Batch):
-        part = lens_samples(batch)
-        if part is not None:
-            yield part
+        if batch.made is not None:
+            yield from batch.made
+        else:  # subpaths kept for chosen strategies (see Bidirectional.evaluate)
+            part = lens_samples(batch)
+            if part is not None:
+                yield part
 
     def _weights(self, part: Contributions, batch: Batch) -> np.ndarray:
         return np.ones(part.count)

@@ -38,6 +38,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Callable
 
 import numpy as np
 
@@ -51,7 +52,7 @@ from .wavefront import Lanes, take_lanes
 
 __all__ = ["Subpaths", "Vertices", "LensHits", "SubpathSettings", "SURFACE", "CAMERA", "LIGHT", "SAFETY_VERTICES",
            "CAMERA_START", "LIGHT_START", "CAMERA_VERTEX", "LIGHT_VERTEX", "camera_subpaths", "light_subpaths",
-           "to_area", "cos_at", "reverse_pdf"]
+           "stream_light_vertices", "to_area", "cos_at", "reverse_pdf"]
 
 SURFACE, CAMERA, LIGHT = 0, 1, 2
 # Subpaths still growing at this many vertices are cut (and counted): only lossless traps get there.
@@ -67,6 +68,7 @@ LIGHT_START = Dimensions(emission=5, connect=2)
 CAMERA_VERTEX = Dimensions(bsdf=3, roulette=1, connect=3)
 LIGHT_VERTEX = Dimensions(bsdf=3, roulette=1, connect=2)
 _WALK_FIELDS = WALK_FIELDS + ("lane", "q", "prev_n", "prev_infinite")
+STREAM_CHUNK = 16384  # the fewest vertices stream_light_vertices hands over at once (besides the last call)
 
 
 def cos_at(normal: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -231,10 +233,13 @@ class SubpathSettings:
 
 
 class _Recorder:
-    """Vertices collected depth by depth (records of the lanes that have them), flattened at the end."""
+    """Vertices collected depth by depth (records of the lanes that have them), flattened at the end; or, with
+    ``consume``, handed to it record by record and not kept (a record is then final when it is made: only
+    walks without densities, whose ``rev`` is never filled in later, stream)."""
 
-    def __init__(self) -> None:
+    def __init__(self, consume: Callable[[dict[str, np.ndarray]], None] | None = None) -> None:
         self.records: list[dict[str, np.ndarray]] = []
+        self.consume = consume
 
     def add(self, lanes: np.ndarray, index: int, kind: int, **fields: np.ndarray) -> dict:
         """Record vertex ``index`` of ``kind`` for ``lanes``: the given :data:`FIELDS` (``p``, ``n``, ``beta``,
@@ -247,7 +252,10 @@ class _Recorder:
                       entity=np.full(count, -1, np.int64), q=np.ones(count), q_rev=np.ones(count),
                       infinite=np.zeros(count, bool), delta=np.zeros(count, bool))
         record.update(fields)
-        self.records.append(record)
+        if self.consume is None:
+            self.records.append(record)
+        else:
+            self.consume(record)
         return record
 
     def flatten(self, lanes: int, terminated: np.ndarray, densities: bool = True) -> Subpaths:
@@ -416,6 +424,46 @@ def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool,
     the ray leaving it carries Le |cos| / (pmf p_pos p_dir).  ``lens``: look
     for rays through a thin lens.
     """
+    recorder = _Recorder()
+    growth = _light_walk(settings, count, sampler, recorder, lens, limit)
+    subpaths = recorder.flatten(count, growth.terminated, settings.densities)
+    return subpaths, LensHits.concatenate(growth.lens_hits or [], settings.colours.channels)
+
+
+def stream_light_vertices(settings: SubpathSettings, count: int, sampler, consume: Callable[[Subpaths], None],
+                          chunk: int = STREAM_CHUNK) -> np.ndarray:
+    """The light subpaths of :func:`light_subpaths` (the same numbers, the same vertices), handed to ``consume``
+    while they are walked instead of kept (a light tracer joins them to the camera there, and its memory does
+    not grow with the subpaths' length): first the vertices 0, one per lane in lane order, then the later
+    vertices depth after depth, in calls of at least ``chunk`` vertices (the last one excepted) so that the
+    few vertices of a long walk's last depths do not cost a call each.  Each call gets a :class:`Subpaths`
+    without ``offset`` (its vertices are not grouped by lane) and without densities: walks that keep densities
+    cannot stream, since their reverse densities are known only one vertex later.  Returns ``terminated``
+    (count,): the lanes whose walks kept only the hero wavelength somewhere."""
+    if settings.densities:
+        raise ValueError("stream_light_vertices: walks that keep densities cannot stream their vertices")
+    names = [name for name in FIELDS if name not in DENSITY_FIELDS]
+    pending: list[dict[str, np.ndarray]] = []
+
+    def hand_over() -> None:
+        fields = {name: np.concatenate([record[name] for record in pending], axis=-1) for name in names}
+        pending.clear()
+        consume(Subpaths(offset=None, terminated=None, **{**dict.fromkeys(FIELDS), **fields}))
+
+    def collect(record: dict[str, np.ndarray]) -> None:
+        pending.append(record)
+        if record["index"][0] == 0 or sum(part["lane"].size for part in pending) >= chunk:
+            hand_over()
+
+    terminated = _light_walk(settings, count, sampler, _Recorder(collect), False, None).terminated
+    if pending:
+        hand_over()
+    return terminated
+
+
+def _light_walk(settings: SubpathSettings, count: int, sampler, recorder: _Recorder, lens: bool,
+                limit: np.ndarray | None) -> _Growth:
+    """Walk ``count`` light subpaths (see :func:`light_subpaths`), recording their vertices in ``recorder``."""
     scene, colours = settings.scene, settings.colours
     lights = scene.lights
     u = LIGHT_START.split(sampler.draw(LIGHT_START.size))
@@ -423,7 +471,6 @@ def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool,
     with np.errstate(divide="ignore", invalid="ignore"):
         beta0 = np.where(e.pdf_pos > 0, 1.0 / e.pdf_pos, 0.0)
         beta = e.value * np.where(e.pdf_dir > 0, beta0 * e.cos_light / e.pdf_dir, 0.0)
-    recorder = _Recorder()
     record = recorder.add(np.arange(count), 0, LIGHT, p=e.point.astype(np.float32), n=e.normal, eps=e.epsilon,
                           beta=np.repeat(beta0[None, :], colours.channels, axis=0),
                           fwd=lights.pdf_le(e.entity, e.normal, e.direction)[0], entity=e.entity.astype(np.int64),
@@ -445,5 +492,4 @@ def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool,
     growth.limit = limit
     growth.run()
     settings.counters.rays += growth.walk.rays
-    subpaths = recorder.flatten(count, growth.terminated, settings.densities)
-    return subpaths, LensHits.concatenate(growth.lens_hits or [], colours.channels)
+    return growth
