@@ -446,7 +446,10 @@ def stream_light_vertices(settings: SubpathSettings, count: int, sampler, consum
     pending: list[dict[str, np.ndarray]] = []
 
     def hand_over() -> None:
-        fields = {name: np.concatenate([record[name] for record in pending], axis=-1) for name in names}
+        if len(pending) == 1:
+            fields = {name: pending[0][name] for name in names}
+        else:
+            fields = {name: np.concatenate([record[name] for record in pending], axis=-1) for name in names}
         pending.clear()
         consume(Subpaths(offset=None, terminated=None, **{**dict.fromkeys(FIELDS), **fields}))
 
