@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import argparse
 import cProfile
-import dataclasses
 import pstats
 import statistics
 import sys
@@ -113,7 +112,8 @@ def time_to_target(scene_name: str, args) -> None:
         print("  Mitsuba 3 not installed (pip install mitsuba): its column is left out")
     runs = [(estimator, estimator, scene) for estimator in ESTIMATORS]
     if args.fast:
-        runs.append(("pt-fast", "pt", dataclasses.replace(scene, traversal="fast")))
+        fast = ps.load_scene(ROOT / "scenes" / scene_name / "scene.toml", **{"render.traversal": "fast"})
+        runs.append(("pt-fast", "pt", fast))
         ps.render(runs[-1][2], "pt", spp=1, seed=0, threads=args.threads)
     ratios: dict[str, list[float]] = {"pt / mitsuba": [], "pt-fast / mitsuba": [], "bdpt / pt": [], "lt / pt": []}
     for repeat in range(args.repeats):

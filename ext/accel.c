@@ -13,8 +13,9 @@
  * between triangles that share an edge, and hits match embreex's exactly.  Without
  * it (watertight=False) Embree's faster arithmetic lets rays aimed within rounding
  * of a shared edge pass through it; its traversal then meets denormal numbers, so
- * its queries run with flush-to-zero and denormals-are-zero set in the tracing
- * threads' MXCSR (restored afterwards: NumPy's arithmetic never sees the modes).
+ * Embree's calls run with flush-to-zero and denormals-are-zero set in the calling
+ * thread's MXCSR (x86; restored right after each call: neither the rays built here
+ * nor NumPy's arithmetic see the modes).
  * On the Cornell box's bounce rays this reaches 1.5x the watertight rays per
  * second (README, Performance).
  *
@@ -229,6 +230,34 @@ static void note_bad_ray(Query *q, npy_intp i)
     }
 }
 
+/* A fast (non-watertight) scene's queries: Embree runs with MXCSR's flush-to-zero and denormals-are-zero set
+ * (x86 only), and the thread gets its own modes back before anything else runs -- building the rays included,
+ * which stays bit for bit the NumPy reference.  Returns the modes to restore. */
+static unsigned int flush_denormals(const Query *q)
+{
+#ifdef PS_HAS_MXCSR
+    if (q->flush_denormals) {
+        const unsigned int modes = _mm_getcsr();
+        _mm_setcsr(modes | _MM_FLUSH_ZERO_ON | _MM_DENORMALS_ZERO_ON);
+        return modes;
+    }
+#else
+    (void)q;
+#endif
+    return 0;
+}
+
+static void restore_modes(const Query *q, unsigned int modes)
+{
+#ifdef PS_HAS_MXCSR
+    if (q->flush_denormals)
+        _mm_setcsr(modes);
+#else
+    (void)q;
+    (void)modes;
+#endif
+}
+
 /* Occlusion in 16-wide packets, like closest hits: on the shadow rays of path tracing and light tracing
  * they test 1.2-1.3x the rays per second of one rtcOccluded1 call per ray (README, Performance). */
 static void occlude_range(Query *q, npy_intp begin, npy_intp end)
@@ -265,8 +294,11 @@ static void occlude_range(Query *q, npy_intp begin, npy_intp end)
             valid[k] = -1;
             any = 1;
         }
-        if (any)
+        if (any) {
+            const unsigned int modes = flush_denormals(q);
             ps_embree.rtcOccluded16(valid, q->scene, &rays, NULL);
+            restore_modes(q, modes);
+        }
         for (int k = 0; k < count; ++k)
             q->occluded[p + k] = valid[k] && rays.tfar[k] < 0.0f; /* Embree sets tfar to -inf on occlusion */
     }
@@ -306,8 +338,11 @@ static void intersect_range(Query *q, npy_intp begin, npy_intp end)
                 }
             }
         }
-        if (any)
+        if (any) {
+            const unsigned int modes = flush_denormals(q);
             ps_embree.rtcIntersect16(valid, q->scene, &rh, NULL);
+            restore_modes(q, modes);
+        }
         for (int k = 0; k < count; ++k) {
             npy_intp i = p + k;
             if (valid[k] && rh.hit.geomID[k] != PS_RTC_INVALID_GEOMETRY_ID) {
@@ -338,11 +373,6 @@ static void intersect_range(Query *q, npy_intp begin, npy_intp end)
 static void *trace_worker(void *arg)
 {
     Query *q = (Query *)arg;
-#ifdef PS_HAS_MXCSR
-    const unsigned int csr = _mm_getcsr();
-    if (q->flush_denormals)
-        _mm_setcsr(csr | _MM_FLUSH_ZERO_ON | _MM_DENORMALS_ZERO_ON);
-#endif
     for (;;) {
         long long begin = atomic_fetch_add(&q->next_ray, CHUNK_RAYS);
         if (begin >= (long long)q->n)
@@ -353,9 +383,6 @@ static void *trace_worker(void *arg)
         else
             intersect_range(q, (npy_intp)begin, (npy_intp)end);
     }
-#ifdef PS_HAS_MXCSR
-    _mm_setcsr(csr);
-#endif
     return NULL;
 }
 

@@ -65,10 +65,11 @@ class Accel(_native.Accel):
     indices : (F, 3) uint32, C-contiguous
     threads : default number of query threads; 0 means every core this process may use.
     watertight : Embree's robust build (default): no ray slips between triangles that share an edge, and hits
-        are embreex's exactly.  False builds without it: closest hits are about 1.5x as fast on bounce rays (the
-        queries run with denormals flushed to zero in the tracing threads), but a ray aimed within rounding of a
-        shared edge can pass through it -- on rays aimed at the edges of the shipped scenes, up to 4% of them
-        (see README, Performance).  Hit distances differ from the watertight ones by up to about 1e-5 relative.
+        are embreex's exactly.  False builds without it: closest hits are about 1.5x as fast on bounce rays (on
+        x86, Embree's calls run with denormals flushed to zero), but a ray aimed within rounding of a shared edge
+        can pass through it -- of rays aimed at the edges of the shipped scenes, 0.3-7% more miss than with the
+        watertight build (see README, Performance).  Hit distances differ from the watertight ones by up to
+        about 2e-5 relative.
 
     Rays are given as (3, N) arrays of origins and directions (float32 or
     float64, any strides) and per-ray ``tmin``/``tmax`` (scalars or (N,)

@@ -46,19 +46,23 @@ def test_subpaths_know_where_they_are_specular():
     assert sub.any_specular(np.array([1, 1]), 3, np.array([3, 4])).tolist() == [False, False]
 
 
-def _light_walk_inputs(count: int):
-    scene = ps.load_scene(CORNELL)
-    lt = LightTracer()
-    samplers = {stream: StreamSamplers(9).open([(0, 0, code)], [count]) for stream, code in STREAMS.items()}
-    state, settings = lt._walk_settings(scene, RGBMode(), samplers, Counters(), RenderControl())
-    return scene, lt, settings, samplers["light"]
+def _samplers(count: int) -> dict:
+    return {stream: StreamSamplers(9).open([(0, 0, code)], [count]) for stream, code in STREAMS.items()}
+
+
+def _light_walk(count: int):
+    """What a light tracer's walks of ``count`` lanes on the Cornell box share, and their sampler."""
+    samplers = _samplers(count)
+    _, settings = LightTracer()._walk_settings(ps.load_scene(CORNELL), RGBMode(), samplers, Counters(),
+                                                RenderControl())
+    return settings, samplers["light"]
 
 
 def test_streamed_light_vertices_are_the_kept_ones():
     count, chunk = 4096, 500
-    _, _, settings, sampler = _light_walk_inputs(count)
+    settings, sampler = _light_walk(count)
     kept, _ = light_subpaths(settings, count, sampler, False)
-    _, _, settings, sampler = _light_walk_inputs(count)   # the same numbers again
+    settings, sampler = _light_walk(count)   # the same numbers again
     calls = []
     terminated = stream_light_vertices(settings, count, sampler, calls.append, chunk=chunk)
     np.testing.assert_array_equal(terminated, kept.terminated)
@@ -76,29 +80,37 @@ def test_streamed_light_vertices_are_the_kept_ones():
 
 
 def test_walks_with_densities_do_not_stream():
-    _, _, settings, sampler = _light_walk_inputs(64)
+    settings, sampler = _light_walk(64)
     settings.densities = True
     with pytest.raises(ValueError, match="walks that keep densities cannot stream"):
         stream_light_vertices(settings, 64, sampler, lambda vertices: None)
 
 
+def test_no_lanes_stream_nothing():
+    settings, sampler = _light_walk(0)
+    calls = []
+    assert stream_light_vertices(settings, 0, sampler, calls.append).size == 0
+    assert [call.lane.size for call in calls] == [0]
+
+
 def test_the_light_tracer_makes_while_walking_the_connections_of_kept_subpaths():
-    count = 4096
+    count = 40_000    # vertices 0, then depths of more than STREAM_CHUNK vertices alone, then the last ones joined
     scene = ps.load_scene(CORNELL)
     lt = LightTracer()
     made = []
     for streamed in (True, False):
-        samplers = {stream: StreamSamplers(9).open([(0, 0, code)], [count]) for stream, code in STREAMS.items()}
-        args = (scene, RGBMode(), np.arange(count) % scene.camera.pixel_count, samplers, np.array([0, count]),
-                Counters(), RenderControl())
+        counters = Counters()
+        args = (scene, RGBMode(), np.arange(count) % scene.camera.pixel_count, _samplers(count), np.array([0, count]),
+                counters, RenderControl())
         batch, _ = lt._subpaths(*args) if streamed else Bidirectional._subpaths(lt, *args)
         assert (batch.made is not None) == streamed
         parts = list(lt._contributions(batch))
-        assert len(parts) == (2 if streamed else 1)   # vertices 0, then the 4096 lanes' later vertices in one chunk
+        assert len(parts) > 3 if streamed else len(parts) == 1
         rows = {name: np.concatenate([getattr(part, name) for part in parts], axis=-1)
                 for name in ("lane", "s", "t", "value", "raster", "flags")}
         order = np.lexsort((rows["s"], rows["lane"]))
-        made.append({name: np.take(value, order, axis=-1) for name, value in rows.items()} | {"rays": batch.rays})
-    assert made[0]["lane"].size > count
+        made.append({name: np.take(value, order, axis=-1) for name, value in rows.items()}
+                    | {"rays": batch.rays, "counted rays": counters.rays, "longest": counters.longest})
+    assert made[0]["lane"].size > count and made[0]["longest"] > 10
     for name, value in made[0].items():
         np.testing.assert_array_equal(value, made[1][name], err_msg=name)

@@ -44,7 +44,9 @@ CHUNK = 1 << 17
 class Batch:
     """The subpaths of a batch of lanes and what every strategy reads.  ``units`` (lanes + 1,): the lanes
     of unit j (one pass of one tile) are ``units[j]`` .. ``units[j+1] - 1``; joins are chunked unit by
-    unit, so that a unit's results do not depend on what else shares the batch."""
+    unit, so that a unit's results do not depend on what else shares the batch.  A light tracer's batch
+    holds only the light vertices 0 in ``light`` and, in ``made``, the connections it made while the subpaths
+    were walked."""
 
     scene: object
     light: Subpaths
@@ -59,7 +61,7 @@ class Batch:
     nonfinite: int = 0  # contributions dropped because a channel or their weight was NaN or infinite
     chosen: tuple[np.ndarray, np.ndarray] | None = None   # (s, t) per lane: only that strategy (MMLT); None: all
     lane_flags: np.ndarray | None = None  # (lanes,) the flags of each lane's light; None: from light's vertices 0
-    made: list["Contributions"] | None = None  # connections made while the subpaths were walked (light tracing)
+    made: list[Contributions] | None = None  # connections made while the subpaths were walked (light tracing)
 
     def __post_init__(self) -> None:
         if self.lane_flags is None:

@@ -16,12 +16,17 @@ and ``pyramid`` as for :mod:`pathspace.estimators.bdpt`.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Mapping
 
 import numpy as np
 
+from ..sampler import Sampler
+from .base import Counters
 from .bidirectional import Bidirectional
 from .connections import Batch, Contributions, lens_samples
+from .control import RenderControl
 from .subpaths import Subpaths, stream_light_vertices
+from .wavefront import Lanes
 
 __all__ = ["LightTracer"]
 
@@ -47,20 +52,21 @@ class LightTracer(Bidirectional):
             lines.append("environment seen directly: not formed (an infinite light cannot be joined to the camera)")
         return lines
 
-    def _subpaths(self, scene, mode, pixels, samplers, units, counters, control, chosen=None):
+    def _subpaths(self, scene, mode, pixels: np.ndarray, samplers: Mapping[str, Sampler], units: np.ndarray,
+                  counters: Counters, control: RenderControl,
+                  chosen: tuple[np.ndarray, np.ndarray] | None = None) -> tuple[Batch, Lanes]:
         """The connections of light subpaths to the camera, made while the subpaths are walked (a batch that keeps
         them in ``made``, and the light vertices 0 only), and the lanes' colour state."""
         if chosen is not None:
             return super()._subpaths(scene, mode, pixels, samplers, units, counters, control, chosen)
         state, settings = self._walk_settings(scene, mode, samplers, counters, control)
-        batches: list[Batch] = []
+        batch: Batch | None = None
 
         def connect(vertices: Subpaths) -> None:
-            if not batches:  # the vertices 0, one per lane: the lanes' lights
-                batches.append(Batch(scene, vertices, None, None, settings.colours, settings.options,
-                                     self.depth_limit, units, densities=False,
-                                     lane_flags=scene.lights.flags.take(vertices.entity), made=[]))
-            batch = batches[0]
+            nonlocal batch
+            if batch is None:  # the vertices 0, one per lane: the lanes' lights
+                batch = Batch(scene, vertices, None, None, settings.colours, settings.options, self.depth_limit,
+                              units, densities=False, lane_flags=scene.lights.flags.take(vertices.entity), made=[])
             part = lens_samples(batch, vertices)
             if part is not None:
                 batch.made.append(part)
@@ -70,7 +76,7 @@ class LightTracer(Bidirectional):
         terminated = stream_light_vertices(settings, pixels.size, samplers["light"], connect)
         if terminated.any():
             mode.terminate_secondary(state, terminated)
-        return batches[0], state
+        return batch, state
 
     def _contributions(self, batch: Batch):
         if batch.made is not None:

@@ -68,7 +68,7 @@ LIGHT_START = Dimensions(emission=5, connect=2)
 CAMERA_VERTEX = Dimensions(bsdf=3, roulette=1, connect=3)
 LIGHT_VERTEX = Dimensions(bsdf=3, roulette=1, connect=2)
 _WALK_FIELDS = WALK_FIELDS + ("lane", "q", "prev_n", "prev_infinite")
-STREAM_CHUNK = 16384  # the fewest vertices stream_light_vertices hands over at once (besides the last call)
+STREAM_CHUNK = 16384  # the fewest vertices stream_light_vertices hands over at once (but vertices 0 and the last)
 
 
 def cos_at(normal: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -93,6 +93,9 @@ def reverse_pdf(materials: MaterialLanes, n: np.ndarray, wi: np.ndarray, wo: np.
 @dataclass
 class Subpaths:
     """Vertices of one kind of subpath (camera or light) for a batch of lanes, flat with CSR offsets.
+
+    Vertices handed over while they are walked (:func:`stream_light_vertices`) are not grouped by lane: their
+    ``offset`` and ``terminated`` are None, and only the fields a light tracer reads are set.
 
     Per vertex: ``lane``, ``index`` (position in its subpath), ``p``, ``n``
     (geometric normal; an area light's normal; the lens axis; the direction
@@ -433,8 +436,8 @@ def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool,
 def stream_light_vertices(settings: SubpathSettings, count: int, sampler, consume: Callable[[Subpaths], None],
                           chunk: int = STREAM_CHUNK) -> np.ndarray:
     """The light subpaths of :func:`light_subpaths` (the same numbers, the same vertices), handed to ``consume``
-    while they are walked instead of kept (a light tracer joins them to the camera there, and its memory does
-    not grow with the subpaths' length): first the vertices 0, one per lane in lane order, then the later
+    while they are walked instead of kept (a light tracer joins them to the camera there, and keeps no
+    vertices): first the vertices 0, one per lane in lane order, then the later
     vertices depth after depth, in calls of at least ``chunk`` vertices (the last one excepted) so that the
     few vertices of a long walk's last depths do not cost a call each.  Each call gets a :class:`Subpaths`
     without ``offset`` (its vertices are not grouped by lane) and without densities: walks that keep densities
@@ -444,6 +447,7 @@ def stream_light_vertices(settings: SubpathSettings, count: int, sampler, consum
         raise ValueError("stream_light_vertices: walks that keep densities cannot stream their vertices")
     names = [name for name in FIELDS if name not in DENSITY_FIELDS]
     pending: list[dict[str, np.ndarray]] = []
+    handed: list[int] = []   # vertices handed over so far
 
     def hand_over() -> None:
         if len(pending) == 1:
@@ -451,11 +455,12 @@ def stream_light_vertices(settings: SubpathSettings, count: int, sampler, consum
         else:
             fields = {name: np.concatenate([record[name] for record in pending], axis=-1) for name in names}
         pending.clear()
+        handed.append(fields["lane"].size)
         consume(Subpaths(offset=None, terminated=None, **{**dict.fromkeys(FIELDS), **fields}))
 
     def collect(record: dict[str, np.ndarray]) -> None:
         pending.append(record)
-        if record["index"][0] == 0 or sum(part["lane"].size for part in pending) >= chunk:
+        if not handed or sum(part["lane"].size for part in pending) >= chunk:   # vertices 0 go alone
             hand_over()
 
     terminated = _light_walk(settings, count, sampler, _Recorder(collect), False, None).terminated

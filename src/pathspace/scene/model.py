@@ -40,7 +40,10 @@ class Scene:
     traversal : "watertight" (default) or "fast": how its BVH traces rays (``[render] traversal``).  Watertight
         rays never slip between triangles that share an edge; "fast" traces about 1.5x the rays per second
         but lets a ray aimed within rounding of a shared edge pass through it (see :class:`~pathspace.accel.Accel`,
-        ``watertight``).  For speed comparisons with renderers that make the same trade (Mitsuba 3).
+        ``watertight``).  For speed comparisons with renderers that make the same trade (Mitsuba 3).  Choose it
+        when loading (``load_scene(path, **{"render.traversal": "fast"})``), so that it is part of the scene's
+        ``fingerprint``, which references, resumed renders and cached results go by; ``dataclasses.replace``
+        keeps the fingerprint it copies.
     """
 
     camera: PinholeCamera
