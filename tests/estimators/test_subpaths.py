@@ -69,7 +69,8 @@ def test_streamed_light_vertices_are_the_kept_ones():
     assert calls[0].index.tolist() == [0] * count and calls[0].lane.tolist() == list(range(count))
     sizes = [call.lane.size for call in calls[1:]]
     assert len(sizes) > 2 and min(sizes[:-1]) >= chunk and max(sizes) < count   # later depths, joined in chunks
-    assert all(call.offset is None and call.fwd is None and call.rev is None for call in calls)  # no densities
+    assert all(call.fwd is None and call.rev is None for call in calls)  # no densities
+    assert calls[0].offset.tolist() == list(range(count + 1)) and all(call.offset is None for call in calls[1:])
     lane, index = (np.concatenate([getattr(call, name) for call in calls]) for name in ("lane", "index"))
     order = np.lexsort((index, lane))   # kept subpaths: lane after lane, by index
     assert index.max() > 10

@@ -60,12 +60,10 @@ class Batch:
     rays: int = 0      # shadow rays traced
     nonfinite: int = 0  # contributions dropped because a channel or their weight was NaN or infinite
     chosen: tuple[np.ndarray, np.ndarray] | None = None   # (s, t) per lane: only that strategy (MMLT); None: all
-    lane_flags: np.ndarray | None = None  # (lanes,) the flags of each lane's light; None: from light's vertices 0
     made: list[Contributions] | None = None  # connections made while the subpaths were walked (light tracing)
 
     def __post_init__(self) -> None:
-        if self.lane_flags is None:
-            self.lane_flags = self.scene.lights.flags.take(self.light.entity.take(self.light.offset[:-1]))
+        self.lane_flags = self.scene.lights.flags.take(self.light.entity.take(self.light.offset[:-1]))
 
     def wanted(self, lane: np.ndarray, s, t) -> np.ndarray | bool:
         """Whether the strategies (s, t) of connections of ``lane`` are to be computed (all, unless ``chosen``)."""

@@ -64,9 +64,9 @@ class LightTracer(Bidirectional):
 
         def connect(vertices: Subpaths) -> None:
             nonlocal batch
-            if batch is None:  # the vertices 0, one per lane: the lanes' lights
+            if batch is None:  # the vertices 0, one per lane: the batch reads the lanes' lights there
                 batch = Batch(scene, vertices, None, None, settings.colours, settings.options, self.depth_limit,
-                              units, densities=False, lane_flags=scene.lights.flags.take(vertices.entity), made=[])
+                              units, densities=False, made=[])
             part = lens_samples(batch, vertices)
             if part is not None:
                 batch.made.append(part)

@@ -94,8 +94,9 @@ def reverse_pdf(materials: MaterialLanes, n: np.ndarray, wi: np.ndarray, wo: np.
 class Subpaths:
     """Vertices of one kind of subpath (camera or light) for a batch of lanes, flat with CSR offsets.
 
-    Vertices handed over while they are walked (:func:`stream_light_vertices`) are not grouped by lane: their
-    ``offset`` and ``terminated`` are None, and only the fields a light tracer reads are set.
+    Vertices handed over while they are walked (:func:`stream_light_vertices`) have no ``terminated``, and only
+    the fields a light tracer reads; past the vertices 0 (one per lane) they are not grouped by lane, and their
+    ``offset`` is None.
 
     Per vertex: ``lane``, ``index`` (position in its subpath), ``p``, ``n``
     (geometric normal; an area light's normal; the lens axis; the direction
@@ -440,27 +441,30 @@ def stream_light_vertices(settings: SubpathSettings, count: int, sampler, consum
     vertices): first the vertices 0, one per lane in lane order, then the later
     vertices depth after depth, in calls of at least ``chunk`` vertices (the last one excepted) so that the
     few vertices of a long walk's last depths do not cost a call each.  Each call gets a :class:`Subpaths`
-    without ``offset`` (its vertices are not grouped by lane) and without densities: walks that keep densities
-    cannot stream, since their reverse densities are known only one vertex later.  Returns ``terminated``
+    without densities (walks that keep densities cannot stream, since their reverse densities are known only
+    one vertex later), and but for the vertices 0 without ``offset`` (its vertices are not grouped by lane).  Returns ``terminated``
     (count,): the lanes whose walks kept only the hero wavelength somewhere."""
     if settings.densities:
         raise ValueError("stream_light_vertices: walks that keep densities cannot stream their vertices")
     names = [name for name in FIELDS if name not in DENSITY_FIELDS]
     pending: list[dict[str, np.ndarray]] = []
-    handed: list[int] = []   # vertices handed over so far
+    started = False   # whether the vertices 0 went out
 
-    def hand_over() -> None:
+    def hand_over(offset: np.ndarray | None = None) -> None:
         if len(pending) == 1:
             fields = {name: pending[0][name] for name in names}
         else:
             fields = {name: np.concatenate([record[name] for record in pending], axis=-1) for name in names}
         pending.clear()
-        handed.append(fields["lane"].size)
-        consume(Subpaths(offset=None, terminated=None, **{**dict.fromkeys(FIELDS), **fields}))
+        consume(Subpaths(offset=offset, terminated=None, **{**dict.fromkeys(FIELDS), **fields}))
 
     def collect(record: dict[str, np.ndarray]) -> None:
+        nonlocal started
         pending.append(record)
-        if not handed or sum(part["lane"].size for part in pending) >= chunk:   # vertices 0 go alone
+        if not started:   # the vertices 0 go alone: each lane's first vertex
+            started = True
+            hand_over(np.arange(count + 1, dtype=np.int64))
+        elif sum(part["lane"].size for part in pending) >= chunk:
             hand_over()
 
     terminated = _light_walk(settings, count, sampler, _Recorder(collect), False, None).terminated
