@@ -26,7 +26,8 @@
  * (NumPy's own power agrees to within an ulp), and a light sample counts as useful when any channel of
  * f |cos| is positive, where the NumPy code read only the first three of spectral rendering's four.
  */
-#include "native.h"
+#include "direct.h"
+#include "light_sample.h"
 
 #define NPY_NO_DEPRECATED_API NPY_2_0_API_VERSION
 #define NO_IMPORT_ARRAY
@@ -36,28 +37,6 @@
 #include <math.h>
 #include <stdint.h>
 
-/* Strategies, as pathspace.estimators.pt.MIS_CODES numbers them: unweighted, three MIS heuristics, and (emitters
- * hit only) the weight of BSDF samples where light samples are taken alone. */
-enum { MIS_NONE, MIS_BALANCE, MIS_POWER, MIS_UNIFORM, LIGHT_SAMPLES_ONLY };
-
-#define TABLE_ROWS 13 /* an area light's triangle table: p0 (3), e1 (3), e2 (3), unit normal (3), ray offset (1) */
-
-/* Weight of a strategy of density a against one of density b, as pathspace.mis.mis_weight. */
-static double mis_weight(int heuristic, double exponent, double a, double b)
-{
-    double ratio;
-    if (heuristic == MIS_UNIFORM) {
-        ratio = a > 0.0 ? (b > 0.0 ? 1.0 : 0.0) : INFINITY;
-    } else {
-        ratio = b / a;
-        if (heuristic == MIS_POWER)
-            ratio = exponent == 2.0 ? ratio * ratio : pow(ratio, exponent);
-    }
-    double weight = 1.0 / (1.0 + ratio);
-    if (isnan(weight))
-        weight = isinf(a) ? 0.5 : 0.0;
-    return weight;
-}
 
 PyObject *ps_next_event_value(PyObject *module, PyObject *args)
 {
@@ -85,10 +64,11 @@ PyObject *ps_next_event_value(PyObject *module, PyObject *args)
     PyArrayObject *beta = a[0], *f_cos = a[1], *le = a[2], *pdf_light = a[3], *pdf_bsdf = a[4], *facing = a[5],
                   *delta = a[6];
     npy_intp channels = PyArray_DIM(beta, 0), n = PyArray_DIM(beta, 1);
-    if (channels < 1 || PyArray_DIM(f_cos, 0) != channels || PyArray_DIM(le, 0) != channels ||
+    if (channels < 1 || channels > PS_MAX_CHANNELS || PyArray_DIM(f_cos, 0) != channels ||
+        PyArray_DIM(le, 0) != channels ||
         PyArray_DIM(f_cos, 1) != n || PyArray_DIM(le, 1) != n || PyArray_DIM(pdf_light, 0) != n ||
         PyArray_DIM(pdf_bsdf, 0) != n || PyArray_DIM(facing, 0) != n || (delta && PyArray_DIM(delta, 0) != n)) {
-        PyErr_Format(PyExc_ValueError, "next_event_value: beta, f_cos and le (C, N) with C >= 1, and pdf_light, "
+        PyErr_Format(PyExc_ValueError, "next_event_value: beta, f_cos and le (C, N) with 1 <= C <= 4, and pdf_light, "
                                        "pdf_bsdf, facing and delta (N,) must agree; beta is (%zd, %zd)",
                      (Py_ssize_t)channels, (Py_ssize_t)n);
         return NULL;
@@ -106,18 +86,16 @@ PyObject *ps_next_event_value(PyObject *module, PyObject *args)
     npy_bool *useful = (npy_bool *)PyArray_DATA((PyArrayObject *)out[1]);
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp i = 0; i < n; ++i) {
-        double scale = 1.0 / pl[i];
-        if (heuristic != MIS_NONE && !(is_delta && is_delta[i]))
-            scale *= mis_weight(heuristic, exponent, pl[i], pb[i]);
-        int reflects = 0, nan = 0;
+        double bi[PS_MAX_CHANNELS], fi[PS_MAX_CHANNELS], li[PS_MAX_CHANNELS], vi[PS_MAX_CHANNELS];
         for (npy_intp c = 0; c < channels; ++c) {
-            double fc = f[c * n + i];
-            nan |= isnan(fc);
-            reflects |= fc > 0.0;
+            bi[c] = b[c * n + i];
+            fi[c] = f[c * n + i];
+            li[c] = l[c * n + i];
         }
-        useful[i] = faces[i] && scale > 0.0 && reflects && !nan;
+        useful[i] = (npy_bool)ps_next_event(channels, bi, fi, li, pl[i], pb[i], faces[i], is_delta && is_delta[i],
+                                            heuristic, exponent, vi);
         for (npy_intp c = 0; c < channels; ++c)
-            value[c * n + i] = useful[i] ? b[c * n + i] * f[c * n + i] * (l[c * n + i] * scale) : 0.0;
+            value[c * n + i] = vi[c];
     }
     Py_END_ALLOW_THREADS
     return Py_BuildValue("(NN)", out[0], out[1]);
@@ -164,7 +142,7 @@ PyObject *ps_area_emission(PyObject *module, PyObject *args)
     if (ps_checked_arrays(objs, specs, 12, (PyObject **)a) < 0)
         return NULL;
     npy_intp n = PyArray_DIM(a[0], 0), triangles = PyArray_DIM(a[1], 0), emitters = PyArray_DIM(a[2], 1);
-    int agree = PyArray_DIM(a[2], 0) == TABLE_ROWS && PyArray_DIM(a[3], 0) == emitters &&
+    int agree = PyArray_DIM(a[2], 0) == AREA_TABLE_ROWS && PyArray_DIM(a[3], 0) == emitters &&
                 PyArray_DIM(a[4], 0) == emitters && PyArray_DIM(a[5], 0) >= emitters &&
                 PyArray_DIM(a[10], 0) == n && PyArray_DIM(a[11], 0) == n;
     for (int k = 6; k < 10; ++k)
@@ -172,7 +150,7 @@ PyObject *ps_area_emission(PyObject *module, PyObject *args)
     if (!agree) {
         PyErr_Format(PyExc_ValueError, "area_emission: table (%d, E), area and two_sided (E,), pmf (at least E,), "
                                        "prim, pdf_prev and delta_prev (N,) and origin, p, normal and direction "
-                                       "(3, N) must agree", TABLE_ROWS);
+                                       "(3, N) must agree", AREA_TABLE_ROWS);
         return NULL;
     }
     const int32_t *prim = (const int32_t *)PyArray_DATA(a[0]);
@@ -226,7 +204,7 @@ PyObject *ps_area_emission(PyObject *module, PyObject *args)
             double cos_light = (double)fabsf((light_normal[0] * d[0] + light_normal[emitters] * d[1]) +
                                              light_normal[2 * emitters] * d[2]) / sqrt(dist2);
             double pdf_light = pmf[e] * (dist2 > 0.0 ? dist2 / (area[e] * cos_light) : 0.0);
-            w = mis_weight(strategy, exponent, pdf_prev[i], pdf_light);
+            w = ps_mis_weight(strategy, exponent, pdf_prev[i], pdf_light);
         }
         lanes[m] = i;
         emitter[m] = e;

@@ -11,7 +11,7 @@
  * Every value is computed in the operations and order of the NumPy code of AreaTables.sample, which the tests
  * keep as the reference (tests/lights/test_area_kernel.py), so the samples are bit for bit the same.
  */
-#include "native.h"
+#include "light_sample.h"
 
 #define NPY_NO_DEPRECATED_API NPY_2_0_API_VERSION
 #define NO_IMPORT_ARRAY
@@ -20,24 +20,6 @@
 
 #include <math.h>
 #include <stdint.h>
-
-#define TABLE_ROWS 13 /* p0 (3), e1 (3), e2 (3), unit normal (3), ray offset (1) */
-
-/* The number of entries of the increasing cdf (n) that are <= x, NaN counting as larger than every number. */
-static npy_intp entries_at_most(const double *cdf, npy_intp n, double x)
-{
-    if (isnan(x))
-        return n;
-    npy_intp lo = 0, hi = n;
-    while (lo < hi) {
-        npy_intp mid = lo + (hi - lo) / 2;
-        if (cdf[mid] <= x)
-            lo = mid + 1;
-        else
-            hi = mid;
-    }
-    return lo;
-}
 
 PyObject *ps_area_light_sample(PyObject *module, PyObject *args)
 {
@@ -60,10 +42,10 @@ PyObject *ps_area_light_sample(PyObject *module, PyObject *args)
     if (!receivers)
         return NULL;
     npy_intp lights = PyArray_DIM(table, 1), n = PyArray_DIM(u, 1);
-    if (PyArray_DIM(table, 0) != TABLE_ROWS || lights < 1 || PyArray_DIM(area, 0) != lights ||
+    if (PyArray_DIM(table, 0) != AREA_TABLE_ROWS || lights < 1 || PyArray_DIM(area, 0) != lights ||
         PyArray_DIM(two_sided, 0) != lights || PyArray_DIM(cdf, 0) != lights || PyArray_DIM(pmf, 0) != lights) {
         PyErr_Format(PyExc_ValueError, "area_light_sample: table (%d, E) with E >= 1, and area, two_sided, cdf and "
-                                       "pmf (E,) must agree", TABLE_ROWS);
+                                       "pmf (E,) must agree", AREA_TABLE_ROWS);
         return NULL;
     }
     if (PyArray_DIM(receivers, 1) != n) {
@@ -99,33 +81,21 @@ PyObject *ps_area_light_sample(PyObject *module, PyObject *args)
     double *pdf = (double *)PyArray_DATA((PyArrayObject *)out[6]);
     float *epsilon = (float *)PyArray_DATA((PyArrayObject *)out[7]);
     Py_BEGIN_ALLOW_THREADS
+    PsAreaLights light_table = {t, a, c, p, two, lights};
     for (npy_intp i = 0; i < n; ++i) {
-        npy_intp j = entries_at_most(c, lights, uu[i]);
-        if (j > lights - 1)
-            j = lights - 1;
-        entity[i] = j;
-        double root = sqrt(uu[u_row + i]);
-        float b1 = (float)(root * (1.0 - uu[2 * u_row + i])), b2 = (float)(root * uu[2 * u_row + i]);
-        float w[3], nn[3];
+        float receiver[3] = {x[i], x[x_row + i], x[2 * x_row + i]};
+        PsLightSample s;
+        ps_sample_area_light(&light_table, uu[i], uu[u_row + i], uu[2 * u_row + i], receiver, &s);
+        entity[i] = s.entity;
         for (int k = 0; k < 3; ++k) {
-            float y = ps_triangle_coordinate(t, lights, j, k, b1, b2);
-            nn[k] = t[(9 + k) * lights + j];
-            point[k * n + i] = y;
-            normal[k * n + i] = nn[k];
-            w[k] = y - x[k * x_row + i];
+            point[k * n + i] = s.point[k];
+            normal[k * n + i] = s.normal[k];
+            wi[k * n + i] = s.wi[k];
         }
-        epsilon[i] = t[12 * lights + j];
-        float dist2 = (w[0] * w[0] + w[1] * w[1]) + w[2] * w[2];
-        float d = sqrtf(dist2);
-        for (int k = 0; k < 3; ++k) {
-            w[k] = d > 0.0f ? w[k] / d : 0.0f;
-            wi[k * n + i] = w[k];
-        }
-        float cos_light = -((nn[0] * w[0] + nn[1] * w[1]) + nn[2] * w[2]);
-        distance[i] = d;
-        facing[i] = two[j] || cos_light > 0.0f;
-        double density = d > 0.0f ? (double)dist2 / (a[j] * (double)fabsf(cos_light)) : 0.0;
-        pdf[i] = density * p[j];
+        distance[i] = s.distance;
+        facing[i] = (npy_bool)s.facing;
+        pdf[i] = s.pdf;
+        epsilon[i] = s.epsilon;
     }
     Py_END_ALLOW_THREADS
     return Py_BuildValue("(NNNNNNNN)", out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7]);

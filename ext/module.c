@@ -94,6 +94,13 @@ static PyMethodDef module_methods[] = {
      "scatter_step(beta, weight, survival, u, p, normal, eps, wi)\n--\n\n(beta (C, N) float64, alive (N,) bool, "
      "origin (3, N) float32): walks leaving points p along BSDF samples wi of weight `weight`, surviving roulette "
      "with probability `survival` (None: 1) decided by u (see ext/scatter.c)."},
+    {"pt_vertex", ps_pt_vertex, METH_VARARGS,
+     "pt_vertex(kind, reflectance, ior, albedo, table, area, two_sided, cdf, pmf, radiance, p, normal, eps, cos, "
+     "direction, material, beta, eta_scale, depth, u, cos_phi, sin_phi, diffuse_technique, heuristic, policy, "
+     "rr_depth, trapped_depth, exponent, probability, cap)\n--\n\n(value, useful, light_point, light_normal, "
+     "light_eps, normal, beta, alive, origin, direction, pdf, delta, eta_scale, light_samples): one vertex of a "
+     "path tracer's walks, next-event estimation, BSDF sample and roulette in one pass (see ext/pt_vertex.c and "
+     "pathspace.estimators.pt_fused)."},
     {"take_lanes", ps_take_lanes, METH_VARARGS,
      "take_lanes(indices, arrays)\n--\n\nlist: numpy.take(a, indices, axis=-1) of every array a of the list `arrays` "
      "(lanes along the last axis, as many in each), in one call with the GIL released (see ext/lanes.c)."},

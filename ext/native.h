@@ -15,6 +15,10 @@
 
 #include "embree4_api.h"
 
+/* The most colour channels a lane carries (RGB: 3; spectral: 4 wavelengths), which per-lane kernels keep in
+ * local arrays. */
+#define PS_MAX_CHANNELS 4
+
 /* Embree loader (embree_loader.c). */
 extern EmbreeAPI ps_embree;     /* function table, valid once ps_embree_device != NULL */
 extern RTCDevice ps_embree_device;
@@ -96,6 +100,8 @@ PyObject *ps_area_emission(PyObject *module, PyObject *args);
 
 /* Random walks leaving their vertices: throughput, roulette, the next ray's origin (scatter.c). */
 PyObject *ps_scatter_step(PyObject *module, PyObject *args);
+/* One vertex of a path tracer's walks, fused (pt_vertex.c). */
+PyObject *ps_pt_vertex(PyObject *module, PyObject *args);
 
 /* The columns `indices` of every per-lane array: a wavefront's compaction (lanes.c). */
 PyObject *ps_take_lanes(PyObject *module, PyObject *args);

@@ -10,7 +10,7 @@
  * Every value is computed in the operations and order of the NumPy code the tests keep as the reference
  * (tests/estimators/test_scatter_kernel.py), so the walks are bit for bit the same.
  */
-#include "native.h"
+#include "scatter.h"
 
 #define NPY_NO_DEPRECATED_API NPY_2_0_API_VERSION
 #define NO_IMPORT_ARRAY
@@ -38,12 +38,13 @@ PyObject *ps_scatter_step(PyObject *module, PyObject *args)
     PyArrayObject *beta = a[0], *weight = a[1], *survival = a[2], *u = a[3], *p = a[4], *normal = a[5], *eps = a[6],
                   *wi = a[7];
     npy_intp channels = PyArray_DIM(beta, 0), n = PyArray_DIM(beta, 1);
-    if (channels < 1 || PyArray_DIM(weight, 0) != channels || PyArray_DIM(weight, 1) != n ||
+    if (channels < 1 || channels > PS_MAX_CHANNELS || PyArray_DIM(weight, 0) != channels ||
+        PyArray_DIM(weight, 1) != n ||
         (survival && PyArray_DIM(survival, 0) != n) || PyArray_DIM(u, 0) != n || PyArray_DIM(eps, 0) != n ||
         PyArray_DIM(p, 0) != 3 || PyArray_DIM(normal, 0) != 3 || PyArray_DIM(wi, 0) != 3 || PyArray_DIM(p, 1) != n ||
         PyArray_DIM(normal, 1) != n || PyArray_DIM(wi, 1) != n) {
-        PyErr_Format(PyExc_ValueError, "scatter_step: beta and weight (C, N) with C >= 1, survival, u and eps (N,), "
-                                       "and p, normal and wi (3, N) must agree; beta is (%zd, %zd)",
+        PyErr_Format(PyExc_ValueError, "scatter_step: beta and weight (C, N) with 1 <= C <= 4, survival, u and eps "
+                                       "(N,), and p, normal and wi (3, N) must agree; beta is (%zd, %zd)",
                      (Py_ssize_t)channels, (Py_ssize_t)n);
         return NULL;
     }
@@ -61,25 +62,18 @@ PyObject *ps_scatter_step(PyObject *module, PyObject *args)
     float *origin = (float *)PyArray_DATA((PyArrayObject *)out[2]);
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp i = 0; i < n; ++i) {
-        int positive = 0, nan = 0;
+        double bi[PS_MAX_CHANNELS], fi[PS_MAX_CHANNELS], out_i[PS_MAX_CHANNELS];
         for (npy_intp c = 0; c < channels; ++c) {
-            double fc = f[c * n + i];
-            nan |= isnan(fc);
-            positive |= fc > 0.0;
-            beta_out[c * n + i] = b[c * n + i] * fc;
+            bi[c] = b[c * n + i];
+            fi[c] = f[c * n + i];
         }
-        int lives = positive && !nan;
-        if (q) {
-            lives = lives && uu[i] < q[i];
-            if (q[i] > 0.0)
-                for (npy_intp c = 0; c < channels; ++c)
-                    beta_out[c * n + i] = beta_out[c * n + i] / q[i];
-        }
-        alive[i] = (npy_bool)lives;
-        float cos_w = (nn[i] * w[i] + nn[n + i] * w[n + i]) + nn[2 * n + i] * w[2 * n + i];
-        float side = cos_w < 0.0f ? -e[i] : e[i];
+        float xi[3] = {x[i], x[n + i], x[2 * n + i]}, ni[3] = {nn[i], nn[n + i], nn[2 * n + i]},
+              wi_[3] = {w[i], w[n + i], w[2 * n + i]}, oi[3];
+        alive[i] = (npy_bool)ps_scatter(channels, bi, fi, q ? q + i : NULL, uu[i], xi, ni, e[i], wi_, out_i, oi);
+        for (npy_intp c = 0; c < channels; ++c)
+            beta_out[c * n + i] = out_i[c];
         for (int k = 0; k < 3; ++k)
-            origin[k * n + i] = x[k * n + i] + nn[k * n + i] * side;
+            origin[k * n + i] = oi[k];
     }
     Py_END_ALLOW_THREADS
     return Py_BuildValue("(NNN)", out[0], out[1], out[2]);

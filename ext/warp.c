@@ -8,6 +8,7 @@
  * order of the NumPy code the tests keep as the reference (tests/test_warp_kernel.py), bit for bit.
  */
 #include "native.h"
+#include "warp.h"
 
 #define NPY_NO_DEPRECATED_API NPY_2_0_API_VERSION
 #define NO_IMPORT_ARRAY
@@ -46,13 +47,10 @@ PyObject *ps_cosine_about(PyObject *module, PyObject *args)
     float *w = (float *)PyArray_DATA((PyArrayObject *)out);
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp i = 0; i < n; ++i) {
-        float z = 1.0f - 2.0f * (float)u[i];
-        float t = 1.0f - z * z;
-        float r = sqrtf(t < 0.0f ? 0.0f : t);
-        float d[3] = {nn[i] + r * c[i], nn[n + i] + r * s[i], nn[2 * n + i] + z};
-        float length = sqrtf((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]);
+        float ni[3] = {nn[i], nn[n + i], nn[2 * n + i]}, wi[3];
+        ps_cosine_direction(ni, u[i], c[i], s[i], wi);
         for (int k = 0; k < 3; ++k)
-            w[k * n + i] = length > 1e-6f ? d[k] / length : nn[k * n + i];
+            w[k * n + i] = wi[k];
     }
     Py_END_ALLOW_THREADS
     return out;

@@ -31,6 +31,13 @@ light_selection : "power" (default) or "uniform"
     How a light is chosen for a light sample (see :mod:`pathspace.lights`).
 light_measure : "area" (default) or "solid_angle"
     How a point on an emitting triangle is sampled.
+kernel : "fused" (default) or "numpy"
+    Where a vertex's work is done.  "fused": next-event estimation, BSDF
+    sampling and roulette in one C pass per bounce for the scenes it serves
+    (RGB; diffuse, mirror and smooth dielectric materials; light samples on
+    area lights by area; see :mod:`pathspace.estimators.pt_fused`), the
+    NumPy code elsewhere; "numpy": always the NumPy code, the reference the
+    fused kernel is tested against.  Both give the same image bit for bit.
 rr, rr_depth, rr_probability, rr_cap
     Russian roulette (see :mod:`pathspace.roulette`); default: throughput-based
     survival (pbrt-v4's rule) from depth 5.  The throughput it reads includes
@@ -63,6 +70,7 @@ from ..sampler import Sampler
 from ..spectra import RGBMode
 from ..vecmath import RAY_TMIN, dot, offset_origin
 from . import parameters as p
+from .pt_fused import FusedVertex, fused_vertex
 from .base import TILE_PIXELS, Counters, Estimator, ItemResult, RenderJob, WorkItem, parameter
 from .visibility import light_sample_blocked
 from .walk import WALK_FIELDS, Arrival, Dimensions, Walk
@@ -71,6 +79,7 @@ from .wavefront import ItemBook, Lanes
 __all__ = ["PathTracer"]
 
 LIGHT_SAMPLING = ("mis", "nee", "none", "mixture")
+KERNELS = ("fused", "numpy")
 CAMERA_DIMENSIONS = Dimensions(pixel=2, lens=2)
 # Paths still alive after this many segments are cut and counted (``truncated`` in the stats): only
 # scenes that trap light without loss (mirror or glass enclosures) get there.
@@ -93,7 +102,8 @@ MIS_CODES = {"none": 0, "balance": 1, "power": 2, "uniform": 3, "nee": 4}
 @dataclass
 class _Bounce:
     """What every bounce of one wavefront reads: the scene, the colour mode, the light strategy in use
-    (none without lights), whether there is an environment, where finished paths go, the counters."""
+    (none without lights), whether there is an environment, where finished paths go, the counters, and the
+    fused vertex kernel if it serves the scene (see :mod:`pathspace.estimators.pt_fused`)."""
 
     scene: object
     mode: object
@@ -101,6 +111,7 @@ class _Bounce:
     environment: bool
     book: ItemBook
     counters: Counters
+    fused: FusedVertex | None = None
 
 
 @dataclass
@@ -118,6 +129,9 @@ class PathTracer(Estimator):
     diffuse_sampling: str = p.diffuse_sampling()
     light_selection: str = p.light_selection()
     light_measure: str = p.light_measure()
+    kernel: str = parameter("fused", "where a vertex's work is done: 'fused' (one C pass where the scene allows; "
+                                     "the same image) or 'numpy' (the reference code)",
+                            lambda v, n: choice(v, n, KERNELS))
     rr: str = p.roulette_policy("throughput")
     rr_depth: int = p.roulette_depth(5)
     rr_probability: float = p.roulette_probability()
@@ -151,6 +165,10 @@ class PathTracer(Estimator):
             lines.append({"nee": "next-event estimation only", "none": "BSDF sampling only"}[self.light_sampling])
         if lights.has_delta and self.light_sampling in ("mis", "nee"):
             lines.append("point/spot/directional lights: light sampling only (BSDF samples cannot hit them)")
+        strategy = self._strategy(scene)
+        fused, reason = fused_vertex(self, scene, RGBMode(), strategy, self._heuristic(strategy))
+        lines.append("vertices in one C pass (the fused kernel) in RGB, in NumPy when spectral" if fused is not None
+                     else f"vertices in NumPy ({reason})")
         delta = scene.materials.delta_names
         lines.append(f"specular (delta) materials: {', '.join(delta)}: no light sampling at their vertices"
                      if delta else "no specular (delta) materials: no specular code runs")
@@ -242,10 +260,18 @@ class PathTracer(Estimator):
             walk.rays = deep.rays = 0
         return bounce.book.finished()[0][1]
 
+    def _strategy(self, scene) -> str:
+        """The light strategy in use on ``scene``: none without lights."""
+        return self.light_sampling if scene.lights.count else "none"
+
+    def _heuristic(self, strategy: str) -> int:
+        """How light samples are weighted (``MIS_CODES``), -1 if none are taken."""
+        return {"mis": MIS_CODES[self.mis], "nee": MIS_CODES["none"]}.get(strategy, -1)
+
     def _bounce_context(self, scene, mode, counters: Counters) -> _Bounce:
-        lights = scene.lights
-        return _Bounce(scene, mode, self.light_sampling if lights.count else "none", lights.environment is not None,
-                       ItemBook(3), counters)
+        strategy = self._strategy(scene)
+        return _Bounce(scene, mode, strategy, scene.lights.environment is not None, ItemBook(3), counters,
+                       fused_vertex(self, scene, mode, strategy, self._heuristic(strategy))[0])
 
     def _start(self, bounce: _Bounce, pixels: np.ndarray, sampler: Sampler, tickets: np.ndarray) -> Walk:
         """Camera paths through ``pixels`` about to trace their first segment."""
@@ -294,6 +320,9 @@ class PathTracer(Estimator):
 
     def _scatter(self, walk: Walk, arrival: Arrival, bounce: _Bounce) -> None:
         """Next-event estimation and the next direction at every lane's vertex."""
+        if bounce.fused is not None:
+            self._fused_scatter(walk, arrival, bounce)
+            return
         scene, lanes, mode = bounce.scene, walk.lanes, bounce.mode
         colours = mode.colours(lanes)
         u = walk.draw()
@@ -312,6 +341,25 @@ class PathTracer(Estimator):
         if not alive.all():
             self._retire(bounce, lanes, ~alive)
             walk.keep(np.flatnonzero(alive))
+
+    def _fused_scatter(self, walk: Walk, arrival: Arrival, bounce: _Bounce) -> None:
+        """:meth:`_scatter` in one C pass (``ext/pt_vertex.c``) but for the shadow rays, bit for bit."""
+        lanes = walk.lanes
+        out = bounce.fused(arrival, lanes, walk.numbers())
+        walk.rays += out.light_samples
+        useful = np.flatnonzero(out.useful)
+        if useful.size:
+            blocked = bounce.scene.accel.occluded_between(arrival.p, out.normal, arrival.eps, out.light_point,
+                                                          out.light_normal, out.light_eps, useful, threads=1)
+            out.value[:, useful[blocked]] = 0.0
+        lanes.radiance += out.value
+        lanes.beta, lanes.origin, lanes.direction, lanes.pdf, lanes.delta = (out.beta, out.origin, out.direction,
+                                                                             out.pdf, out.delta)
+        if out.eta_scale is not None:
+            lanes.eta_scale = out.eta_scale
+        if not out.alive.all():
+            self._retire(bounce, lanes, ~out.alive)
+            walk.keep(np.flatnonzero(out.alive))
 
     @staticmethod
     def _retire(bounce: _Bounce, lanes: Lanes, done: np.ndarray) -> None:

@@ -118,9 +118,13 @@ class Walk:
         """Number of live lanes."""
         return self.lanes.size
 
+    def numbers(self) -> np.ndarray:
+        """This vertex's uniform numbers for every live lane, (dims.size, N) in the order of :attr:`dims`."""
+        return self.sampler.draw(self.dims.size)
+
     def draw(self) -> SimpleNamespace:
         """This vertex's uniform numbers for every live lane, by name (see :class:`Dimensions`)."""
-        return self.dims.split(self.sampler.draw(self.dims.size))
+        return self.dims.split(self.numbers())
 
     def trace(self):
         """Closest hits (:class:`pathspace.accel.Hits`) of the current rays; depth grows by one segment."""

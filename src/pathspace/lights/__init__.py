@@ -153,6 +153,11 @@ class LightSet:
             raise ValueError(f"light selection: expected one of {SELECTIONS}, got {selection!r}")
         return self._pmfs[selection]
 
+    def cdf(self, selection: str) -> np.ndarray:
+        """Cumulative selection probabilities of the entities (the last 1), which :meth:`select` searches."""
+        self.pmf(selection)
+        return self._cdfs[selection]
+
     @cached_property
     def _cdfs(self) -> dict[str, np.ndarray]:
         cdfs = {}
@@ -163,7 +168,7 @@ class LightSet:
 
     def select(self, u: np.ndarray, selection: str) -> np.ndarray:
         """Entities chosen by ``selection`` from uniforms ``u`` (N,)."""
-        return np.minimum(np.searchsorted(self._cdfs[selection], u, side="right"), self.count - 1)
+        return np.minimum(np.searchsorted(self.cdf(selection), u, side="right"), self.count - 1)
 
     # -- dispatch ----------------------------------------------------------------------------------
 
@@ -209,7 +214,7 @@ class LightSet:
         points are sampled by area (the default), both steps are one C pass (``ext/lights.c``, bit for bit
         the NumPy code of the other cases, :meth:`AreaTables.sample`)."""
         if self.models == [AreaLight] and measure == "area" and receivers.dtype == np.float32 and u.dtype == np.float64:
-            return AreaLight.sample_li_selected(self.area, self._cdfs[selection], self.pmf(selection), receivers,
+            return AreaLight.sample_li_selected(self.area, self.cdf(selection), self.pmf(selection), receivers,
                                                 u, colours)
         entity = self.select(u[0], selection)
         pmf = self.pmf(selection).take(entity)

@@ -1,0 +1,459 @@
+/*
+ * One vertex of a path tracer's walks, fused (pathspace.estimators.pt, PathTracer._scatter for the scenes its
+ * fused kernel serves), in one pass with the GIL released.  Per lane, at the surface point p its ray reached:
+ *   1. next-event estimation (materials that are not specular, with light sampling on): a light sample on the
+ *      area lights (ext/light_sample.h), the BSDF's f |cos| and density toward it, and its MIS-weighted value
+ *      (ext/direct.h; Veach 1997, eqs. 9.4 and 9.13), left for the caller to test with a shadow ray;
+ *   2. a BSDF sample: Lambertian (cosine-weighted, ext/warp.h, or uniform over the hemisphere), a delta mirror,
+ *      or a smooth dielectric (Fresnel-weighted choice of reflection and refraction, radiance scaled by
+ *      1 / eta^2 on refraction; Veach 1997, sec. 5.2);
+ *   3. Russian roulette's survival probability (pathspace.roulette.RussianRoulette.survival, every policy), and
+ *      the step to the next ray: throughput, survival and origin (ext/scatter.h).
+ * The BSDFs are those of pathspace.bsdfs (diffuse.py, mirror.py, dielectric.py and fresnel.py), which stay the
+ * reference: every value is computed in the operations and order of the NumPy code, so that a render through
+ * this kernel is bit for bit the render through NumPy (tests/estimators/test_pt_vertex_kernel.py).  RGB only.
+ */
+#include "direct.h"
+#include "light_sample.h"
+#include "scatter.h"
+#include "warp.h"
+
+#define NPY_NO_DEPRECATED_API NPY_2_0_API_VERSION
+#define NO_IMPORT_ARRAY
+#define PY_ARRAY_UNIQUE_SYMBOL pathspace_native_ARRAY_API
+#include <numpy/arrayobject.h>
+
+#include <math.h>
+#include <stdint.h>
+
+/* Material kinds, as pathspace.estimators.pt_fused.MATERIAL_KINDS numbers them. */
+enum { KIND_DIFFUSE, KIND_MIRROR, KIND_DIELECTRIC, KIND_COUNT };
+/* Diffuse sampling techniques (pathspace.bsdfs.DIFFUSE_SAMPLING). */
+enum { DIFFUSE_COSINE, DIFFUSE_UNIFORM };
+/* Roulette policies (pathspace.roulette.POLICIES). */
+enum { ROULETTE_OFF, ROULETTE_FIXED, ROULETTE_ALBEDO, ROULETTE_THROUGHPUT, ROULETTE_COUNT };
+
+#define CHANNELS 3
+#define INV_PI (1.0 / M_PI)
+#define INV_TWO_PI (0.5 / M_PI)
+
+typedef struct {
+    int diffuse_technique, heuristic, policy, start_depth, trapped_depth;
+    double exponent, probability, cap;
+} Options;
+
+/* NumPy's maximum(x, 0) of a float32: NaN stays NaN. */
+static inline float max_zero(float x)
+{
+    return isnan(x) || x > 0.0f ? x : 0.0f;
+}
+
+static inline float dot3(const float a[3], const float b[3])
+{
+    return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2];
+}
+
+/* pathspace.bsdfs.fresnel.fresnel_dielectric: the reflectance F and the cosine of the transmitted angle. */
+static inline double fresnel_dielectric(double cos_i, double eta, double *cos_t)
+{
+    cos_i = cos_i < 0.0 ? 0.0 : (cos_i > 1.0 ? 1.0 : cos_i);
+    double sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
+    double rest = 1.0 - sin2_t;
+    *cos_t = sqrt(rest > 0.0 ? rest : 0.0);
+    double r_parl = (eta * cos_i - *cos_t) / (eta * cos_i + *cos_t);
+    double r_perp = (cos_i - eta * *cos_t) / (cos_i + eta * *cos_t);
+    double f = 0.5 * (r_parl * r_parl + r_perp * r_perp);
+    return sin2_t >= 1.0 || isnan(f) ? 1.0 : f;
+}
+
+/* A BSDF sample: direction, weight f |cos| / pdf, density, whether it is a delta lobe, and the relative index
+ * it crossed (1: none). */
+typedef struct {
+    float wi[3];
+    double weight[CHANNELS], pdf, eta;
+    int delta;
+} Sample;
+
+/* Diffuse.sample: n the normal on the side of wo, u1 the uniform of the height, cos_phi and sin_phi those of
+ * the azimuth of the uniform u2. */
+static void sample_diffuse(const Options *o, const double *albedo, const float n[3], double u1, float cos_phi,
+                           float sin_phi, Sample *s)
+{
+    if (o->diffuse_technique == DIFFUSE_UNIFORM) {
+        float z = 1.0f - 2.0f * (float)u1;
+        float r = sqrtf(max_zero(1.0f - z * z));
+        float sphere[3] = {r * cos_phi, r * sin_phi, z};
+        float side = copysignf(1.0f, dot3(n, sphere));
+        for (int k = 0; k < 3; ++k)
+            s->wi[k] = sphere[k] * side;
+        double cos_i = (double)fabsf(dot3(n, s->wi));
+        for (int c = 0; c < CHANNELS; ++c)
+            s->weight[c] = albedo[c] * (2.0 * cos_i);
+        s->pdf = INV_TWO_PI;
+    } else {
+        ps_cosine_direction(n, u1, cos_phi, sin_phi, s->wi);
+        s->pdf = (double)max_zero(dot3(n, s->wi)) * INV_PI;
+        for (int c = 0; c < CHANNELS; ++c)
+            s->weight[c] = albedo[c];
+    }
+    s->delta = 0;
+    s->eta = 1.0;
+}
+
+/* Mirror.sample: the reflection of wo about n (cos_o = dot(n, wo)). */
+static void sample_mirror(const double *reflectance, const float n[3], const float wo[3], float cos_o, Sample *s)
+{
+    float twice = 2.0f * cos_o;
+    for (int k = 0; k < 3; ++k)
+        s->wi[k] = twice * n[k] - wo[k];
+    for (int c = 0; c < CHANNELS; ++c)
+        s->weight[c] = reflectance[c];
+    s->pdf = 1.0;
+    s->delta = 1;
+    s->eta = 1.0;
+}
+
+/* Dielectric.sample in "radiance" mode: interior index ior, wo arriving from the outside or not, u0 choosing
+ * between reflection (probability F) and refraction. */
+static void sample_dielectric(double ior, int outside, const float n[3], const float wo[3], float cos_o, double u0,
+                              Sample *s)
+{
+    double eta = outside ? ior : 1.0 / ior, cos_i = (double)cos_o, cos_t;
+    double fresnel = fresnel_dielectric(cos_i, eta, &cos_t);
+    int reflects = u0 < fresnel;
+    double w[3];
+    for (int k = 0; k < 3; ++k) {
+        double nk = (double)n[k], wk = (double)wo[k];
+        w[k] = reflects ? 2.0 * cos_i * nk - wk : -wk / eta + (cos_i / eta - cos_t) * nk;
+    }
+    double length = sqrt((w[0] * w[0] + w[1] * w[1]) + w[2] * w[2]);
+    for (int k = 0; k < 3; ++k)
+        s->wi[k] = (float)(w[k] / length);
+    s->pdf = reflects ? fresnel : 1.0 - fresnel;
+    double scale = 1.0 / (eta * eta);
+    for (int c = 0; c < CHANNELS; ++c)
+        s->weight[c] = reflects ? 1.0 : scale;
+    s->delta = 1;
+    s->eta = reflects ? 1.0 : eta;
+}
+
+/* NumPy's max over channels and clip to [0, cap], NaN propagating. */
+static inline double clipped_max(const double *x, double cap)
+{
+    double m = x[0];
+    for (int c = 1; c < CHANNELS; ++c)
+        if (isnan(x[c]) || x[c] > m)
+            m = isnan(m) ? m : x[c];
+    if (isnan(m))
+        return m;
+    return m < 0.0 ? 0.0 : (m > cap ? cap : m);
+}
+
+/* RussianRoulette.survival at a vertex reached after `depth` segments, of a material with `albedo` (specular
+ * or not), for a walk whose throughput after this vertex's sample, scaled back by eta_scale eta^2, is
+ * beta weight eta_scale eta^2. */
+static double survival(const Options *o, int depth, double albedo, int specular, const double *beta,
+                       const Sample *s, double eta_scale)
+{
+    if (depth < o->start_depth)
+        return 1.0;
+    if (o->policy == ROULETTE_FIXED)
+        return 1.0 - o->probability;
+    if (o->policy == ROULETTE_ALBEDO)
+        return albedo < 0.0 ? 0.0 : (albedo > 1.0 ? 1.0 : albedo);
+    double scale = eta_scale * s->eta * s->eta, throughput[CHANNELS];
+    for (int c = 0; c < CHANNELS; ++c)
+        throughput[c] = beta[c] * s->weight[c] * scale;
+    double q = clipped_max(throughput, o->cap);
+    if (specular && depth >= o->trapped_depth)
+        q = isnan(q) || isnan(albedo) ? NAN : (albedo < q ? albedo : q);
+    return q;
+}
+
+/* Lanes are taken in blocks: each stage runs over a block's lanes before the next, so that the long chains of
+ * divisions and square roots of one lane overlap with those of the others (one lane at a time through every
+ * stage measured 1.6x slower). */
+#define BLOCK 64
+
+/* The arrays of a call: the tables, the lanes' inputs and their outputs. */
+typedef struct {
+    npy_intp n, materials;
+    const int8_t *kind;
+    const double *reflectance, *ior, *albedo, *radiance;
+    PsAreaLights lights;
+    const float *p, *normal, *eps, *cos, *direction, *cos_phi, *sin_phi;
+    const int32_t *material, *depth;
+    const double *beta, *eta_scale, *u;
+    double *value, *beta_out, *pdf, *eta_out;
+    npy_bool *useful, *alive, *delta;
+    float *light_point, *light_normal, *light_eps, *normal_out, *origin, *wi;
+} Lanes;
+
+/* The surface seen from lane i's ray (pathspace.bsdfs.Surface.facing): the geometric normal turned toward the
+ * ray's origin, and whether it was (the ray arrives from the outside). */
+static inline int facing_normal(const Lanes *w, npy_intp i, float nf[3])
+{
+    npy_intp n = w->n;
+    int outside = w->cos[i] >= 0.0f;
+    for (int c = 0; c < 3; ++c)
+        nf[c] = w->normal[c * n + i] * (outside ? 1.0f : -1.0f);
+    return outside;
+}
+
+/* Next-event estimation at the lanes start .. end - 1 whose material is diffuse (with light samples on): their
+ * values, usefulness and light points; the turned normals of every lane.  Returns the number of light samples. */
+static npy_intp next_events(const Lanes *w, const Options *o, npy_intp start, npy_intp end)
+{
+    npy_intp n = w->n, count = 0;
+    PsLightSample ls[BLOCK];
+    int sampled[BLOCK];
+    for (npy_intp i = start; i < end; ++i) {
+        PsLightSample *s = ls + (i - start);
+        sampled[i - start] = o->heuristic >= 0 && w->kind[w->material[i]] == KIND_DIFFUSE;
+        if (!sampled[i - start]) {
+            *s = (PsLightSample){0};
+            continue;
+        }
+        float x[3] = {w->p[i], w->p[n + i], w->p[2 * n + i]};
+        ps_sample_area_light(&w->lights, w->u[i], w->u[n + i], w->u[2 * n + i], x, s);
+    }
+    for (npy_intp i = start; i < end; ++i) {
+        const PsLightSample *s = ls + (i - start);
+        int32_t m = w->material[i];
+        float nf[3];
+        facing_normal(w, i, nf);
+        double v[CHANNELS] = {0.0, 0.0, 0.0};
+        int useful = 0;
+        if (sampled[i - start]) {
+            ++count;
+            float cos_i = dot3(nf, s->wi);
+            double cos_over_pi = (double)max_zero(cos_i) * INV_PI, f_cos[CHANNELS], le[CHANNELS], b[CHANNELS];
+            double pdf_bsdf = o->diffuse_technique == DIFFUSE_COSINE ? cos_over_pi : (cos_i > 0.0f ? INV_TWO_PI : 0.0);
+            for (int c = 0; c < CHANNELS; ++c) {
+                f_cos[c] = w->reflectance[c * w->materials + m] * cos_over_pi;
+                le[c] = w->radiance[c * w->lights.count + s->entity];
+                b[c] = w->beta[c * n + i];
+            }
+            useful = ps_next_event(CHANNELS, b, f_cos, le, s->pdf, pdf_bsdf, s->facing, 0, o->heuristic,
+                                   o->exponent, v);
+        }
+        w->useful[i] = (npy_bool)useful;
+        for (int c = 0; c < 3; ++c) {
+            w->value[c * n + i] = v[c];
+            w->light_point[c * n + i] = s->point[c];
+            w->light_normal[c * n + i] = s->normal[c];
+            w->normal_out[c * n + i] = nf[c];
+        }
+        w->light_eps[i] = s->epsilon;
+    }
+    return count;
+}
+
+/* The BSDF samples of the lanes start .. end - 1, their roulette (if `roulette`) and their next rays. */
+static void scatter(const Lanes *w, const Options *o, int roulette, npy_intp start, npy_intp end)
+{
+    npy_intp n = w->n;
+    Sample samples[BLOCK];
+    for (npy_intp i = start; i < end; ++i) {
+        Sample *s = samples + (i - start);
+        int32_t m = w->material[i];
+        int k = w->kind[m];
+        float nf[3], wo[3], cos_o = fabsf(w->cos[i]);
+        int outside = facing_normal(w, i, nf);
+        for (int c = 0; c < 3; ++c)
+            wo[c] = -w->direction[c * n + i];
+        const double *colour = w->reflectance + m;
+        double tint[CHANNELS] = {colour[0], colour[w->materials], colour[2 * w->materials]};
+        if (k == KIND_DIFFUSE)
+            sample_diffuse(o, tint, nf, w->u[4 * n + i], w->cos_phi[i], w->sin_phi[i], s);
+        else if (k == KIND_MIRROR)
+            sample_mirror(tint, nf, wo, cos_o, s);
+        else
+            sample_dielectric(w->ior[m], outside, nf, wo, cos_o, w->u[3 * n + i], s);
+    }
+    for (npy_intp i = start; i < end; ++i) {
+        const Sample *s = samples + (i - start);
+        int32_t m = w->material[i];
+        double b[CHANNELS], next[CHANNELS];
+        for (int c = 0; c < CHANNELS; ++c)
+            b[c] = w->beta[c * n + i];
+        double scale = w->eta_scale ? w->eta_scale[i] : 1.0;
+        double q = roulette ? survival(o, w->depth[i], w->albedo[m], w->kind[m] != KIND_DIFFUSE, b, s, scale) : 1.0;
+        float x[3] = {w->p[i], w->p[n + i], w->p[2 * n + i]}, from[3],
+              ng[3] = {w->normal[i], w->normal[n + i], w->normal[2 * n + i]};
+        w->alive[i] = (npy_bool)ps_scatter(CHANNELS, b, s->weight, roulette ? &q : NULL, w->u[6 * n + i], x, ng,
+                                           w->eps[i], s->wi, next, from);
+        for (int c = 0; c < 3; ++c) {
+            w->beta_out[c * n + i] = next[c];
+            w->origin[c * n + i] = from[c];
+            w->wi[c * n + i] = s->wi[c];
+        }
+        w->pdf[i] = s->pdf;
+        w->delta[i] = (npy_bool)s->delta;
+        if (w->eta_out)
+            w->eta_out[i] = scale * s->eta * s->eta;
+    }
+}
+
+enum {
+    A_KIND, A_REFLECTANCE, A_IOR, A_ALBEDO,                                  /* materials */
+    A_TABLE, A_AREA, A_TWO_SIDED, A_CDF, A_PMF, A_RADIANCE,                  /* emitting triangles */
+    A_P, A_NORMAL, A_EPS, A_COS, A_DIRECTION, A_MATERIAL, A_BETA, A_ETA_SCALE, A_DEPTH, A_U, A_COS_PHI,
+    A_SIN_PHI,                                                               /* lanes */
+    A_COUNT
+};
+
+static const PsArraySpec SPECS[A_COUNT] = {
+    {"kind", NPY_INT8, "int8", 1, 0},           {"reflectance", NPY_DOUBLE, "float64", 2, 0},
+    {"ior", NPY_DOUBLE, "float64", 1, 0},       {"albedo", NPY_DOUBLE, "float64", 1, 0},
+    {"table", NPY_FLOAT, "float32", 2, 1},      {"area", NPY_DOUBLE, "float64", 1, 1},
+    {"two_sided", NPY_BOOL, "bool", 1, 1},      {"cdf", NPY_DOUBLE, "float64", 1, 1},
+    {"pmf", NPY_DOUBLE, "float64", 1, 1},       {"radiance", NPY_DOUBLE, "float64", 2, 1},
+    {"p", NPY_FLOAT, "float32", 2, 0},          {"normal", NPY_FLOAT, "float32", 2, 0},
+    {"eps", NPY_FLOAT, "float32", 1, 0},        {"cos", NPY_FLOAT, "float32", 1, 0},
+    {"direction", NPY_FLOAT, "float32", 2, 0},  {"material", NPY_INT32, "int32", 1, 0},
+    {"beta", NPY_DOUBLE, "float64", 2, 0},      {"eta_scale", NPY_DOUBLE, "float64", 1, 1},
+    {"depth", NPY_INT32, "int32", 1, 0},        {"u", NPY_DOUBLE, "float64", 2, 0},
+    {"cos_phi", NPY_FLOAT, "float32", 1, 0},    {"sin_phi", NPY_FLOAT, "float32", 1, 0},
+};
+
+/* The shapes of the arguments: materials (M,) and (3, M), emitting triangles (13, E), (E,) and (3, E) (all or
+ * none of them), lanes (N,), (3, N) and u (7, N); 0, or -1 with a ValueError. */
+static int check_shapes(PyArrayObject **a, Options *o)
+{
+    npy_intp m = PyArray_DIM(a[A_KIND], 0), n = PyArray_DIM(a[A_DEPTH], 0);
+    int ok = m >= 1 && PyArray_DIM(a[A_REFLECTANCE], 0) == CHANNELS && PyArray_DIM(a[A_REFLECTANCE], 1) == m &&
+             PyArray_DIM(a[A_IOR], 0) == m && PyArray_DIM(a[A_ALBEDO], 0) == m;
+    if (!ok) {
+        PyErr_SetString(PyExc_ValueError, "pt_vertex: kind, ior and albedo (M,) with M >= 1 and reflectance (3, M) "
+                                          "must agree");
+        return -1;
+    }
+    int lights = a[A_TABLE] != NULL;
+    for (int k = A_AREA; k <= A_RADIANCE; ++k)
+        ok = ok && (a[k] != NULL) == lights;
+    if (!ok || lights != (o->heuristic >= 0)) {
+        PyErr_SetString(PyExc_ValueError, "pt_vertex: the light tables are given exactly when light samples are "
+                                          "taken (heuristic >= 0)");
+        return -1;
+    }
+    if (lights) {
+        npy_intp e = PyArray_DIM(a[A_TABLE], 1);
+        ok = e >= 1 && PyArray_DIM(a[A_TABLE], 0) == AREA_TABLE_ROWS && PyArray_DIM(a[A_AREA], 0) == e &&
+             PyArray_DIM(a[A_TWO_SIDED], 0) == e && PyArray_DIM(a[A_CDF], 0) == e && PyArray_DIM(a[A_PMF], 0) == e &&
+             PyArray_DIM(a[A_RADIANCE], 0) == CHANNELS && PyArray_DIM(a[A_RADIANCE], 1) == e;
+        if (!ok) {
+            PyErr_Format(PyExc_ValueError, "pt_vertex: table (%d, E) with E >= 1, area, two_sided, cdf and pmf (E,) "
+                                           "and radiance (3, E) must agree", AREA_TABLE_ROWS);
+            return -1;
+        }
+    }
+    for (int k = A_P; k < A_COUNT; ++k) {
+        PyArrayObject *x = a[k];
+        if (!x)
+            continue;
+        int rows = k == A_U ? 7 : (PyArray_NDIM(x) == 2 ? 3 : 0);
+        if (PyArray_DIM(x, PyArray_NDIM(x) - 1) != n || (rows && PyArray_DIM(x, 0) != rows)) {
+            PyErr_Format(PyExc_ValueError, "pt_vertex: %s must have shape %s with N = %zd (the lanes of depth)",
+                         SPECS[k].name, rows == 7 ? "(7, N)" : (rows ? "(3, N)" : "(N,)"), (Py_ssize_t)n);
+            return -1;
+        }
+    }
+    if (o->policy == ROULETTE_THROUGHPUT && !a[A_ETA_SCALE]) {
+        PyErr_SetString(PyExc_ValueError, "pt_vertex: throughput roulette reads eta_scale, which is None");
+        return -1;
+    }
+    return 0;
+}
+
+/* The outputs, in the order returned. */
+enum {
+    O_VALUE, O_USEFUL, O_LIGHT_POINT, O_LIGHT_NORMAL, O_LIGHT_EPS, O_NORMAL, O_BETA, O_ALIVE, O_ORIGIN, O_WI, O_PDF,
+    O_DELTA, O_ETA_SCALE, O_COUNT
+};
+
+PyObject *ps_pt_vertex(PyObject *module, PyObject *args)
+{
+    (void)module;
+    PyObject *objs[A_COUNT];
+    Options o;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOOOOOOOOOiiiiiddd:pt_vertex", &objs[0], &objs[1], &objs[2],
+                          &objs[3], &objs[4], &objs[5], &objs[6], &objs[7], &objs[8], &objs[9], &objs[10],
+                          &objs[11], &objs[12], &objs[13], &objs[14], &objs[15], &objs[16], &objs[17], &objs[18],
+                          &objs[19], &objs[20], &objs[21], &o.diffuse_technique, &o.heuristic, &o.policy,
+                          &o.start_depth, &o.trapped_depth, &o.exponent, &o.probability, &o.cap))
+        return NULL;
+    if (o.diffuse_technique < DIFFUSE_COSINE || o.diffuse_technique > DIFFUSE_UNIFORM || o.heuristic < -1 ||
+        o.heuristic > MIS_UNIFORM || o.policy < ROULETTE_OFF || o.policy >= ROULETTE_COUNT) {
+        PyErr_Format(PyExc_ValueError, "pt_vertex: diffuse technique 0 or 1, heuristic -1 (no light samples) to 3 "
+                                       "and roulette policy 0 to 3 expected, got %d, %d and %d",
+                     o.diffuse_technique, o.heuristic, o.policy);
+        return NULL;
+    }
+    PyArrayObject *a[A_COUNT];
+    if (ps_checked_arrays(objs, SPECS, A_COUNT, (PyObject **)a) < 0 || check_shapes(a, &o) < 0)
+        return NULL;
+    npy_intp n = PyArray_DIM(a[A_DEPTH], 0), materials = PyArray_DIM(a[A_KIND], 0);
+    const int8_t *kind = (const int8_t *)PyArray_DATA(a[A_KIND]);
+    for (npy_intp m = 0; m < materials; ++m)
+        if (kind[m] < 0 || kind[m] >= KIND_COUNT) {
+            PyErr_Format(PyExc_ValueError, "pt_vertex: kind[%zd] = %d is not a material kind (0 to %d)",
+                         (Py_ssize_t)m, kind[m], KIND_COUNT - 1);
+            return NULL;
+        }
+    npy_intp dims[2] = {CHANNELS, n}, dims3[2] = {3, n};
+    PyObject *out[O_COUNT] = {
+        PyArray_SimpleNew(2, dims, NPY_DOUBLE), PyArray_SimpleNew(1, &n, NPY_BOOL),
+        PyArray_SimpleNew(2, dims3, NPY_FLOAT),  PyArray_SimpleNew(2, dims3, NPY_FLOAT),
+        PyArray_SimpleNew(1, &n, NPY_FLOAT),     PyArray_SimpleNew(2, dims3, NPY_FLOAT),
+        PyArray_SimpleNew(2, dims, NPY_DOUBLE), PyArray_SimpleNew(1, &n, NPY_BOOL),
+        PyArray_SimpleNew(2, dims3, NPY_FLOAT),  PyArray_SimpleNew(2, dims3, NPY_FLOAT),
+        PyArray_SimpleNew(1, &n, NPY_DOUBLE),    PyArray_SimpleNew(1, &n, NPY_BOOL),
+        a[A_ETA_SCALE] ? PyArray_SimpleNew(1, &n, NPY_DOUBLE) : Py_NewRef(Py_None),
+    };
+    if (!ps_outputs_allocated(out, O_COUNT))
+        return NULL;
+#define IN(k, type) ((const type *)(a[k] ? PyArray_DATA(a[k]) : NULL))
+#define OUT(k, type) ((type *)PyArray_DATA((PyArrayObject *)out[k]))
+    Lanes w = {
+        .n = n, .materials = materials, .kind = kind, .reflectance = IN(A_REFLECTANCE, double),
+        .ior = IN(A_IOR, double), .albedo = IN(A_ALBEDO, double), .radiance = IN(A_RADIANCE, double),
+        .lights = {IN(A_TABLE, float), IN(A_AREA, double), IN(A_CDF, double), IN(A_PMF, double),
+                   IN(A_TWO_SIDED, npy_bool), a[A_TABLE] ? PyArray_DIM(a[A_TABLE], 1) : 0},
+        .p = IN(A_P, float), .normal = IN(A_NORMAL, float), .eps = IN(A_EPS, float), .cos = IN(A_COS, float),
+        .direction = IN(A_DIRECTION, float), .cos_phi = IN(A_COS_PHI, float), .sin_phi = IN(A_SIN_PHI, float),
+        .material = IN(A_MATERIAL, int32_t), .depth = IN(A_DEPTH, int32_t), .beta = IN(A_BETA, double),
+        .eta_scale = IN(A_ETA_SCALE, double), .u = IN(A_U, double),
+        .value = OUT(O_VALUE, double), .useful = OUT(O_USEFUL, npy_bool), .light_point = OUT(O_LIGHT_POINT, float),
+        .light_normal = OUT(O_LIGHT_NORMAL, float), .light_eps = OUT(O_LIGHT_EPS, float),
+        .normal_out = OUT(O_NORMAL, float), .beta_out = OUT(O_BETA, double), .alive = OUT(O_ALIVE, npy_bool),
+        .origin = OUT(O_ORIGIN, float), .wi = OUT(O_WI, float), .pdf = OUT(O_PDF, double),
+        .delta = OUT(O_DELTA, npy_bool), .eta_out = a[A_ETA_SCALE] ? OUT(O_ETA_SCALE, double) : NULL,
+    };
+#undef IN
+#undef OUT
+    npy_intp bad = -1, light_samples = 0;
+    Py_BEGIN_ALLOW_THREADS
+    int deep = 0; /* RussianRoulette.survival gives None (every lane survives) if no lane is deep enough */
+    for (npy_intp i = 0; i < n; ++i) {
+        deep |= w.depth[i] >= o.start_depth;
+        if ((uint32_t)w.material[i] >= (uint64_t)materials && bad < 0)
+            bad = i;
+    }
+    int roulette = o.policy != ROULETTE_OFF && deep;
+    if (bad < 0)
+        for (npy_intp start = 0; start < n; start += BLOCK) {
+            npy_intp end = start + BLOCK < n ? start + BLOCK : n;
+            light_samples += next_events(&w, &o, start, end);
+            scatter(&w, &o, roulette, start, end);
+        }
+    Py_END_ALLOW_THREADS
+    if (bad >= 0) {
+        for (int k = 0; k < O_COUNT; ++k)
+            Py_DECREF(out[k]);
+        PyErr_Format(PyExc_IndexError, "pt_vertex: material[%zd] is not a material of the table", (Py_ssize_t)bad);
+        return NULL;
+    }
+    return Py_BuildValue("(NNNNNNNNNNNNNn)", out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7], out[8],
+                         out[9], out[10], out[11], out[12], (Py_ssize_t)light_samples);
+}
