@@ -146,5 +146,9 @@ PyMODINIT_FUNC PyInit__native(void)
         return NULL;
     }
     Py_DECREF(tmin);
+    if (ps_add_pt_vertex_constants(m) < 0) {
+        Py_DECREF(m);
+        return NULL;
+    }
     return m;
 }

@@ -70,6 +70,12 @@ static inline int ps_outputs_allocated(PyObject **out, int count)
     return 1;
 }
 
+/* The float32 dot product of two 3-vectors in the order NumPy's x[0] * y[0] + x[1] * y[1] + x[2] * y[2] takes. */
+static inline float ps_dot3(const float x[3], const float y[3])
+{
+    return (x[0] * y[0] + x[1] * y[1]) + x[2] * y[2];
+}
+
 /* Coordinate c of the point p0 + b1 e1 + b2 e2 on triangle k of a mesh table (rows p0, e1, e2, ... of `count`
  * columns, float32), in the operations of the NumPy expression (p0 + e1 b1) + e2 b2. */
 static inline float ps_triangle_coordinate(const float *table, Py_ssize_t count, Py_ssize_t k, int c, float b1,
@@ -100,8 +106,10 @@ PyObject *ps_area_emission(PyObject *module, PyObject *args);
 
 /* Random walks leaving their vertices: throughput, roulette, the next ray's origin (scatter.c). */
 PyObject *ps_scatter_step(PyObject *module, PyObject *args);
-/* One vertex of a path tracer's walks, fused (pt_vertex.c). */
+/* One vertex of a path tracer's walks, fused (pt_vertex.c), and the constants it shares with Python (0, or -1
+ * with an exception). */
 PyObject *ps_pt_vertex(PyObject *module, PyObject *args);
+int ps_add_pt_vertex_constants(PyObject *module);
 
 /* The columns `indices` of every per-lane array: a wavefront's compaction (lanes.c). */
 PyObject *ps_take_lanes(PyObject *module, PyObject *args);

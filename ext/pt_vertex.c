@@ -26,16 +26,15 @@
 #include <math.h>
 #include <stdint.h>
 
-/* Material kinds, as pathspace.estimators.pt_fused.MATERIAL_KINDS numbers them. */
+/* Material kinds, in the order of _native.PT_VERTEX_KINDS (pathspace.estimators.pt_fused numbers them by it). */
 enum { KIND_DIFFUSE, KIND_MIRROR, KIND_DIELECTRIC, KIND_COUNT };
-/* Diffuse sampling techniques (pathspace.bsdfs.DIFFUSE_SAMPLING). */
+static const char *const KIND_NAMES[KIND_COUNT] = {"diffuse", "mirror", "dielectric"};
+/* Diffuse sampling techniques, in the order of pathspace.bsdfs.DIFFUSE_SAMPLING. */
 enum { DIFFUSE_COSINE, DIFFUSE_UNIFORM };
-/* Roulette policies (pathspace.roulette.POLICIES). */
+/* Roulette policies, in the order of pathspace.roulette.POLICIES. */
 enum { ROULETTE_OFF, ROULETTE_FIXED, ROULETTE_ALBEDO, ROULETTE_THROUGHPUT, ROULETTE_COUNT };
 
 #define CHANNELS 3
-#define INV_PI (1.0 / M_PI)
-#define INV_TWO_PI (0.5 / M_PI)
 
 typedef struct {
     int diffuse_technique, heuristic, policy, start_depth, trapped_depth;
@@ -48,18 +47,13 @@ static inline float max_zero(float x)
     return isnan(x) || x > 0.0f ? x : 0.0f;
 }
 
-static inline float dot3(const float a[3], const float b[3])
-{
-    return (a[0] * b[0] + a[1] * b[1]) + a[2] * b[2];
-}
-
 /* pathspace.bsdfs.fresnel.fresnel_dielectric: the reflectance F and the cosine of the transmitted angle. */
 static inline double fresnel_dielectric(double cos_i, double eta, double *cos_t)
 {
     cos_i = cos_i < 0.0 ? 0.0 : (cos_i > 1.0 ? 1.0 : cos_i);
     double sin2_t = (1.0 - cos_i * cos_i) / (eta * eta);
     double rest = 1.0 - sin2_t;
-    *cos_t = sqrt(rest > 0.0 ? rest : 0.0);
+    *cos_t = sqrt(isnan(rest) || rest > 0.0 ? rest : 0.0); /* np.maximum(0, rest): NaN stays NaN */
     double r_parl = (eta * cos_i - *cos_t) / (eta * cos_i + *cos_t);
     double r_perp = (cos_i - eta * *cos_t) / (cos_i + eta * *cos_t);
     double f = 0.5 * (r_parl * r_parl + r_perp * r_perp);
@@ -83,16 +77,16 @@ static void sample_diffuse(const Options *o, const double *albedo, const float n
         float z = 1.0f - 2.0f * (float)u1;
         float r = sqrtf(max_zero(1.0f - z * z));
         float sphere[3] = {r * cos_phi, r * sin_phi, z};
-        float side = copysignf(1.0f, dot3(n, sphere));
+        float side = copysignf(1.0f, ps_dot3(n, sphere));
         for (int k = 0; k < 3; ++k)
             s->wi[k] = sphere[k] * side;
-        double cos_i = (double)fabsf(dot3(n, s->wi));
+        double cos_i = (double)fabsf(ps_dot3(n, s->wi));
         for (int c = 0; c < CHANNELS; ++c)
             s->weight[c] = albedo[c] * (2.0 * cos_i);
-        s->pdf = INV_TWO_PI;
+        s->pdf = PS_INV_TWO_PI;
     } else {
         ps_cosine_direction(n, u1, cos_phi, sin_phi, s->wi);
-        s->pdf = (double)max_zero(dot3(n, s->wi)) * INV_PI;
+        s->pdf = (double)max_zero(ps_dot3(n, s->wi)) * PS_INV_PI;
         for (int c = 0; c < CHANNELS; ++c)
             s->weight[c] = albedo[c];
     }
@@ -150,8 +144,8 @@ static inline double clipped_max(const double *x, double cap)
 }
 
 /* RussianRoulette.survival at a vertex reached after `depth` segments, of a material with `albedo` (specular
- * or not), for a walk whose throughput after this vertex's sample, scaled back by eta_scale eta^2, is
- * beta weight eta_scale eta^2. */
+ * or not), for a walk of throughput beta taking the sample s: "throughput" reads beta weight (eta_scale eta^2),
+ * the throughput after the sample with the 1 / eta^2 of its refractions undone (Walk.survival). */
 static double survival(const Options *o, int depth, double albedo, int specular, const double *beta,
                        const Sample *s, double eta_scale)
 {
@@ -187,111 +181,116 @@ typedef struct {
     double *value, *beta_out, *pdf, *eta_out;
     npy_bool *useful, *alive, *delta;
     float *light_point, *light_normal, *light_eps, *normal_out, *origin, *wi;
-} Lanes;
+} VertexArrays;
 
 /* The surface seen from lane i's ray (pathspace.bsdfs.Surface.facing): the geometric normal turned toward the
  * ray's origin, and whether it was (the ray arrives from the outside). */
-static inline int facing_normal(const Lanes *w, npy_intp i, float nf[3])
+static inline int facing_normal(const VertexArrays *va, npy_intp i, float nf[3])
 {
-    npy_intp n = w->n;
-    int outside = w->cos[i] >= 0.0f;
+    npy_intp n = va->n;
+    int outside = va->cos[i] >= 0.0f;
     for (int c = 0; c < 3; ++c)
-        nf[c] = w->normal[c * n + i] * (outside ? 1.0f : -1.0f);
+        nf[c] = va->normal[c * n + i] * (outside ? 1.0f : -1.0f);
     return outside;
 }
 
-/* Next-event estimation at the lanes start .. end - 1 whose material is diffuse (with light samples on): their
- * values, usefulness and light points; the turned normals of every lane.  Returns the number of light samples. */
-static npy_intp next_events(const Lanes *w, const Options *o, npy_intp start, npy_intp end)
+/* Next-event estimation at the lanes start .. end - 1 (of materials mat[i - start], checked) whose material is
+ * diffuse, with light samples on: their values, usefulness and light points; the turned normals of every lane.
+ * Returns the number of light samples. */
+static npy_intp next_events(const VertexArrays *va, const Options *o, const int32_t *mat, npy_intp start,
+                            npy_intp end)
 {
-    npy_intp n = w->n, count = 0;
+    npy_intp n = va->n, count = 0;
     PsLightSample ls[BLOCK];
     int sampled[BLOCK];
     for (npy_intp i = start; i < end; ++i) {
         PsLightSample *s = ls + (i - start);
-        sampled[i - start] = o->heuristic >= 0 && w->kind[w->material[i]] == KIND_DIFFUSE;
+        sampled[i - start] = o->heuristic >= 0 && va->kind[mat[i - start]] == KIND_DIFFUSE;
         if (!sampled[i - start]) {
             *s = (PsLightSample){0};
             continue;
         }
-        float x[3] = {w->p[i], w->p[n + i], w->p[2 * n + i]};
-        ps_sample_area_light(&w->lights, w->u[i], w->u[n + i], w->u[2 * n + i], x, s);
+        float x[3] = {va->p[i], va->p[n + i], va->p[2 * n + i]};
+        ps_sample_area_light(&va->lights, va->u[i], va->u[n + i], va->u[2 * n + i], x, s);
     }
     for (npy_intp i = start; i < end; ++i) {
         const PsLightSample *s = ls + (i - start);
-        int32_t m = w->material[i];
+        int32_t m = mat[i - start];
         float nf[3];
-        facing_normal(w, i, nf);
+        facing_normal(va, i, nf);
         double v[CHANNELS] = {0.0, 0.0, 0.0};
         int useful = 0;
         if (sampled[i - start]) {
             ++count;
-            float cos_i = dot3(nf, s->wi);
-            double cos_over_pi = (double)max_zero(cos_i) * INV_PI, f_cos[CHANNELS], le[CHANNELS], b[CHANNELS];
-            double pdf_bsdf = o->diffuse_technique == DIFFUSE_COSINE ? cos_over_pi : (cos_i > 0.0f ? INV_TWO_PI : 0.0);
+            float cos_i = ps_dot3(nf, s->wi);
+            double cos_over_pi = (double)max_zero(cos_i) * PS_INV_PI, f_cos[CHANNELS], le[CHANNELS], b[CHANNELS];
+            double uniform_pdf = cos_i > 0.0f ? PS_INV_TWO_PI : 0.0;
+            double pdf_bsdf = o->diffuse_technique == DIFFUSE_COSINE ? cos_over_pi : uniform_pdf;
             for (int c = 0; c < CHANNELS; ++c) {
-                f_cos[c] = w->reflectance[c * w->materials + m] * cos_over_pi;
-                le[c] = w->radiance[c * w->lights.count + s->entity];
-                b[c] = w->beta[c * n + i];
+                f_cos[c] = va->reflectance[c * va->materials + m] * cos_over_pi;
+                le[c] = va->radiance[c * va->lights.count + s->entity];
+                b[c] = va->beta[c * n + i];
             }
             useful = ps_next_event(CHANNELS, b, f_cos, le, s->pdf, pdf_bsdf, s->facing, 0, o->heuristic,
                                    o->exponent, v);
         }
-        w->useful[i] = (npy_bool)useful;
+        va->useful[i] = (npy_bool)useful;
         for (int c = 0; c < 3; ++c) {
-            w->value[c * n + i] = v[c];
-            w->light_point[c * n + i] = s->point[c];
-            w->light_normal[c * n + i] = s->normal[c];
-            w->normal_out[c * n + i] = nf[c];
+            va->value[c * n + i] = v[c];
+            va->light_point[c * n + i] = s->point[c];
+            va->light_normal[c * n + i] = s->normal[c];
+            va->normal_out[c * n + i] = nf[c];
         }
-        w->light_eps[i] = s->epsilon;
+        va->light_eps[i] = s->epsilon;
     }
     return count;
 }
 
-/* The BSDF samples of the lanes start .. end - 1, their roulette (if `roulette`) and their next rays. */
-static void scatter(const Lanes *w, const Options *o, int roulette, npy_intp start, npy_intp end)
+/* The BSDF samples of the lanes start .. end - 1 (of materials mat[i - start], checked), their roulette (if
+ * `roulette`) and their next rays. */
+static void scatter(const VertexArrays *va, const Options *o, int roulette, const int32_t *mat, npy_intp start,
+                    npy_intp end)
 {
-    npy_intp n = w->n;
+    npy_intp n = va->n;
     Sample samples[BLOCK];
     for (npy_intp i = start; i < end; ++i) {
         Sample *s = samples + (i - start);
-        int32_t m = w->material[i];
-        int k = w->kind[m];
-        float nf[3], wo[3], cos_o = fabsf(w->cos[i]);
-        int outside = facing_normal(w, i, nf);
+        int32_t m = mat[i - start];
+        int k = va->kind[m];
+        float nf[3], wo[3], cos_o = fabsf(va->cos[i]);
+        int outside = facing_normal(va, i, nf);
         for (int c = 0; c < 3; ++c)
-            wo[c] = -w->direction[c * n + i];
-        const double *colour = w->reflectance + m;
-        double tint[CHANNELS] = {colour[0], colour[w->materials], colour[2 * w->materials]};
+            wo[c] = -va->direction[c * n + i];
+        const double *colour = va->reflectance + m;
+        double tint[CHANNELS] = {colour[0], colour[va->materials], colour[2 * va->materials]};
         if (k == KIND_DIFFUSE)
-            sample_diffuse(o, tint, nf, w->u[4 * n + i], w->cos_phi[i], w->sin_phi[i], s);
+            sample_diffuse(o, tint, nf, va->u[4 * n + i], va->cos_phi[i], va->sin_phi[i], s);
         else if (k == KIND_MIRROR)
             sample_mirror(tint, nf, wo, cos_o, s);
         else
-            sample_dielectric(w->ior[m], outside, nf, wo, cos_o, w->u[3 * n + i], s);
+            sample_dielectric(va->ior[m], outside, nf, wo, cos_o, va->u[3 * n + i], s);
     }
     for (npy_intp i = start; i < end; ++i) {
         const Sample *s = samples + (i - start);
-        int32_t m = w->material[i];
+        int32_t m = mat[i - start];
         double b[CHANNELS], next[CHANNELS];
         for (int c = 0; c < CHANNELS; ++c)
-            b[c] = w->beta[c * n + i];
-        double scale = w->eta_scale ? w->eta_scale[i] : 1.0;
-        double q = roulette ? survival(o, w->depth[i], w->albedo[m], w->kind[m] != KIND_DIFFUSE, b, s, scale) : 1.0;
-        float x[3] = {w->p[i], w->p[n + i], w->p[2 * n + i]}, from[3],
-              ng[3] = {w->normal[i], w->normal[n + i], w->normal[2 * n + i]};
-        w->alive[i] = (npy_bool)ps_scatter(CHANNELS, b, s->weight, roulette ? &q : NULL, w->u[6 * n + i], x, ng,
-                                           w->eps[i], s->wi, next, from);
+            b[c] = va->beta[c * n + i];
+        double scale = va->eta_scale ? va->eta_scale[i] : 1.0;
+        double q = roulette ? survival(o, va->depth[i], va->albedo[m], va->kind[m] != KIND_DIFFUSE, b, s, scale) : 1.0;
+        float x[3] = {va->p[i], va->p[n + i], va->p[2 * n + i]}, from[3],
+              ng[3] = {va->normal[i], va->normal[n + i], va->normal[2 * n + i]};
+        va->alive[i] = (npy_bool)ps_scatter(CHANNELS, b, s->weight, roulette ? &q : NULL, va->u[6 * n + i], x, ng,
+                                           va->eps[i], s->wi, next, from);
         for (int c = 0; c < 3; ++c) {
-            w->beta_out[c * n + i] = next[c];
-            w->origin[c * n + i] = from[c];
-            w->wi[c * n + i] = s->wi[c];
+            va->beta_out[c * n + i] = next[c];
+            va->origin[c * n + i] = from[c];
+            va->wi[c * n + i] = s->wi[c];
         }
-        w->pdf[i] = s->pdf;
-        w->delta[i] = (npy_bool)s->delta;
-        if (w->eta_out)
-            w->eta_out[i] = scale * s->eta * s->eta;
+        va->pdf[i] = s->pdf;
+        va->delta[i] = (npy_bool)s->delta;
+        if (va->eta_out)
+            va->eta_out[i] = scale * s->eta * s->eta;
     }
 }
 
@@ -372,6 +371,31 @@ enum {
     O_DELTA, O_ETA_SCALE, O_COUNT
 };
 
+int ps_add_pt_vertex_constants(PyObject *module)
+{
+    PyObject *kinds = PyTuple_New(KIND_COUNT);
+    if (!kinds)
+        return -1;
+    for (int k = 0; k < KIND_COUNT; ++k) {
+        PyObject *name = PyUnicode_FromString(KIND_NAMES[k]);
+        if (!name) {
+            Py_DECREF(kinds);
+            return -1;
+        }
+        PyTuple_SET_ITEM(kinds, k, name);
+    }
+    PyObject *inv_pi = PyFloat_FromDouble(PS_INV_PI), *inv_two_pi = PyFloat_FromDouble(PS_INV_TWO_PI);
+    int status = inv_pi && inv_two_pi && PyModule_AddObjectRef(module, "PT_VERTEX_KINDS", kinds) == 0 &&
+                         PyModule_AddObjectRef(module, "INV_PI", inv_pi) == 0 &&
+                         PyModule_AddObjectRef(module, "INV_TWO_PI", inv_two_pi) == 0
+                     ? 0
+                     : -1;
+    Py_DECREF(kinds);
+    Py_XDECREF(inv_pi);
+    Py_XDECREF(inv_two_pi);
+    return status;
+}
+
 PyObject *ps_pt_vertex(PyObject *module, PyObject *args)
 {
     (void)module;
@@ -415,7 +439,7 @@ PyObject *ps_pt_vertex(PyObject *module, PyObject *args)
         return NULL;
 #define IN(k, type) ((const type *)(a[k] ? PyArray_DATA(a[k]) : NULL))
 #define OUT(k, type) ((type *)PyArray_DATA((PyArrayObject *)out[k]))
-    Lanes w = {
+    VertexArrays va = {
         .n = n, .materials = materials, .kind = kind, .reflectance = IN(A_REFLECTANCE, double),
         .ior = IN(A_IOR, double), .albedo = IN(A_ALBEDO, double), .radiance = IN(A_RADIANCE, double),
         .lights = {IN(A_TABLE, float), IN(A_AREA, double), IN(A_CDF, double), IN(A_PMF, double),
@@ -435,18 +459,22 @@ PyObject *ps_pt_vertex(PyObject *module, PyObject *args)
     npy_intp bad = -1, light_samples = 0;
     Py_BEGIN_ALLOW_THREADS
     int deep = 0; /* RussianRoulette.survival gives None (every lane survives) if no lane is deep enough */
-    for (npy_intp i = 0; i < n; ++i) {
-        deep |= w.depth[i] >= o.start_depth;
-        if ((uint32_t)w.material[i] >= (uint64_t)materials && bad < 0)
-            bad = i;
-    }
+    for (npy_intp i = 0; i < n; ++i)
+        deep |= va.depth[i] >= o.start_depth;
     int roulette = o.policy != ROULETTE_OFF && deep;
-    if (bad < 0)
-        for (npy_intp start = 0; start < n; start += BLOCK) {
-            npy_intp end = start + BLOCK < n ? start + BLOCK : n;
-            light_samples += next_events(&w, &o, start, end);
-            scatter(&w, &o, roulette, start, end);
+    for (npy_intp start = 0; start < n && bad < 0; start += BLOCK) {
+        npy_intp end = start + BLOCK < n ? start + BLOCK : n;
+        int32_t mat[BLOCK]; /* the block's material ids, read once: checked here, used below */
+        for (npy_intp i = start; i < end; ++i) {
+            mat[i - start] = va.material[i];
+            if ((uint32_t)mat[i - start] >= (uint64_t)materials && bad < 0)
+                bad = i;
         }
+        if (bad >= 0)
+            break;
+        light_samples += next_events(&va, &o, mat, start, end);
+        scatter(&va, &o, roulette, mat, start, end);
+    }
     Py_END_ALLOW_THREADS
     if (bad >= 0) {
         for (int k = 0; k < O_COUNT; ++k)

@@ -27,11 +27,6 @@ typedef struct {
     Py_ssize_t count; /* segments: the length of lanes, or N */
 } Segments;
 
-static inline float ps_dot3(const float x[3], const float y[3])
-{
-    return (x[0] * y[0] + x[1] * y[1]) + x[2] * y[2];
-}
-
 /* The ray of segment i as float32 {org xyz, tnear, dir xyz, tfar} (see pathspace.vecmath.shadow_ray: both ends
  * offset toward each other by their error bounds, tmax short of the far surface by the slack of its plane
  * test), with tnear RAY_TMIN; returns 0 if the ray is invalid or its lane is out of range (lanes are read once

@@ -7,6 +7,10 @@
 
 #include <math.h>
 
+/* pathspace.warp.INV_PI and INV_TWO_PI (1 / pi and 0.5 / pi in float64; exported and tested equal). */
+#define PS_INV_PI (1.0 / M_PI)
+#define PS_INV_TWO_PI (0.5 / M_PI)
+
 /* The unit direction w about the unit normal n from the uniform u0 and the cosine and sine of the azimuth
  * 2 pi u1 (float32, as NumPy computes them). */
 static inline void ps_cosine_direction(const float n[3], double u0, float cos_phi, float sin_phi, float w[3])

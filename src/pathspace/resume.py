@@ -83,10 +83,11 @@ class RenderState:
 def render_identity(scene, estimator, mode, *, seed: int, first_pass: int, spp: int | None,
                     time: float | None) -> dict[str, Any]:
     """What must not change between a render and its resumption, as JSON values: the scene's
-    fingerprint, the estimator's name and parameters, the seed, the first pass, the budget (``spp`` or
-    ``time``), the colour mode, its wavelength sampling (spectral renders) and the resolution."""
+    fingerprint, the estimator's name and the parameters that can change the image, the seed, the first
+    pass, the budget (``spp`` or ``time``), the colour mode, its wavelength sampling (spectral renders) and
+    the resolution."""
     return {"scene": scene.fingerprint, "estimator": estimator.name,
-            "params": json.loads(json.dumps(estimator.params, sort_keys=True, default=str)),
+            "params": json.loads(json.dumps(estimator.image_params, sort_keys=True, default=str)),
             "seed": seed, "first_pass": first_pass, "spp": spp, "time": time, "mode": mode.name,
             "wavelengths": getattr(mode, "sampling", None),
             "resolution": [scene.camera.width, scene.camera.height]}

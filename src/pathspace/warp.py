@@ -23,7 +23,7 @@ INV_TWO_PI = 0.5 / np.pi
 INV_FOUR_PI = 0.25 / np.pi
 
 
-def _azimuth(u1: np.ndarray) -> np.ndarray:
+def azimuth(u1: np.ndarray) -> np.ndarray:
     """The angle 2 pi u1 about the sphere's axis, float32, as both sphere warps compute it."""
     return np.float32(2 * np.pi) * u1.astype(np.float32)
 
@@ -32,7 +32,7 @@ def square_to_uniform_sphere(u: np.ndarray) -> np.ndarray:
     """Directions with the uniform density 1/(4 pi) over the unit sphere (Archimedes: z uniform in [-1, 1])."""
     z = np.float32(1) - np.float32(2) * u[0].astype(np.float32)
     r = np.sqrt(np.maximum(np.float32(0), np.float32(1) - z * z))
-    phi = _azimuth(u[1])
+    phi = azimuth(u[1])
     return np.stack((r * np.cos(phi), r * np.sin(phi), z))
 
 
@@ -46,7 +46,7 @@ def square_to_cosine_about(n: np.ndarray, u: np.ndarray) -> np.ndarray:
     n plus the uniform point of the unit sphere :func:`square_to_uniform_sphere` makes of u, normalised
     (Archimedes' hat-box theorem; n itself where the sum vanishes, probability 0).  One C pass
     (``ext/warp.c``) but for the angle's cosine and sine, which NumPy computes as the sphere's warp does."""
-    phi = _azimuth(u[1])
+    phi = azimuth(u[1])
     return _native.cosine_about(np.ascontiguousarray(n, np.float32), np.ascontiguousarray(u[0], np.float64),
                                 np.cos(phi), np.sin(phi))
 

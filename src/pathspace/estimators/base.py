@@ -48,10 +48,12 @@ __all__ = ["TILE_PIXELS", "Budget", "Checkpoint", "Counters", "Estimator", "Item
 TILE_PIXELS = 1 << 16
 
 
-def parameter(default: Any, help: str, check: Callable[[Any, str], Any] | None = None) -> Any:
+def parameter(default: Any, help: str, check: Callable[[Any, str], Any] | None = None, image: bool = True) -> Any:
     """An estimator parameter: a dataclass field with its meaning (``help``) and a validating
-    ``check(value, name)`` that returns the value or raises ValueError("name: expected ..., got ...")."""
-    return field(default=default, metadata={"help": help, "check": check})
+    ``check(value, name)`` that returns the value or raises ValueError("name: expected ..., got ...").
+    ``image=False``: the parameter changes how the image is computed, not the image (a render saved with one
+    value resumes with another; see :attr:`Estimator.image_params`)."""
+    return field(default=default, metadata={"help": help, "check": check, "image": image})
 
 
 @dataclass(frozen=True)
@@ -221,6 +223,12 @@ class Estimator(ABC):
     def params(self) -> dict[str, Any]:
         """The parameter values."""
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.init}
+
+    @property
+    def image_params(self) -> dict[str, Any]:
+        """The values of the parameters that can change the image (all but those declared ``image=False``)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if f.init and f.metadata.get("image", True)}
 
     @abstractmethod
     def plan(self, scene) -> list[str]:

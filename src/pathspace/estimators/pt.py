@@ -70,8 +70,8 @@ from ..sampler import Sampler
 from ..spectra import RGBMode
 from ..vecmath import RAY_TMIN, dot, offset_origin
 from . import parameters as p
-from .pt_fused import FusedVertex, fused_vertex
 from .base import TILE_PIXELS, Counters, Estimator, ItemResult, RenderJob, WorkItem, parameter
+from .pt_fused import FusedVertex, fused_vertex
 from .visibility import light_sample_blocked
 from .walk import WALK_FIELDS, Arrival, Dimensions, Walk
 from .wavefront import ItemBook, Lanes
@@ -131,7 +131,7 @@ class PathTracer(Estimator):
     light_measure: str = p.light_measure()
     kernel: str = parameter("fused", "where a vertex's work is done: 'fused' (one C pass where the scene allows; "
                                      "the same image) or 'numpy' (the reference code)",
-                            lambda v, n: choice(v, n, KERNELS))
+                            lambda v, n: choice(v, n, KERNELS), image=False)
     rr: str = p.roulette_policy("throughput")
     rr_depth: int = p.roulette_depth(5)
     rr_probability: float = p.roulette_probability()
@@ -452,7 +452,7 @@ class PathTracer(Estimator):
         p, surface = arrival.p, arrival.surface
         ls = scene.lights.sample_li(p, u, colours, self.light_selection, self.light_measure)
         f_cos, pdf_bsdf = materials.eval(surface, ls.wi)
-        heuristic = MIS_CODES[self.mis] if self.light_sampling == "mis" else MIS_CODES["none"]
+        heuristic = self._heuristic(self.light_sampling)
         weighed = (np.ascontiguousarray(a, np.float64) for a in (beta, f_cos, ls.value, ls.pdf, pdf_bsdf))
         delta = np.ascontiguousarray(ls.delta, bool) if scene.lights.has_delta else None
         value, useful = _native.next_event_value(*weighed, np.ascontiguousarray(ls.facing, bool), delta, heuristic,

@@ -7,7 +7,7 @@ NumPy code does (which stays the reference, and serves every other case):
 
 - RGB rendering;
 - diffuse, mirror and smooth dielectric materials (the models of
-  :mod:`pathspace.bsdfs` with a ``kind`` in :data:`MATERIAL_KINDS`);
+  :mod:`pathspace.bsdfs` in :data:`MODELS`);
 - light sampling "mis", "nee" or "none" (not "mixture"), with area lights
   alone, points sampled by area, where light samples are taken.
 
@@ -20,16 +20,21 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _native
+from ..bsdfs import DIFFUSE_SAMPLING, Dielectric, Diffuse, Mirror
 from ..lights import AreaLight
 from ..roulette import POLICIES, TRAPPED_DEPTH
 from ..spectra import RGBMode
-from ..warp import _azimuth
+from ..warp import azimuth
 
-__all__ = ["MATERIAL_KINDS", "FusedVertex", "VertexResult", "fused_vertex"]
+__all__ = ["MODELS", "FusedVertex", "VertexResult", "fused_vertex"]
 
-# The material kinds the kernel implements, as ext/pt_vertex.c numbers them.
-MATERIAL_KINDS = {"diffuse": 0, "mirror": 1, "dielectric": 2}
-DIFFUSE_TECHNIQUES = {"cosine": 0, "uniform": 1}
+# The material models the kernel implements (these classes, not subclasses), by the numbers ext/pt_vertex.c
+# gives their kinds.
+MODELS = {model: _native.PT_VERTEX_KINDS.index(model.kind) for model in (Diffuse, Mirror, Dielectric)}
+# The numbers of a vertex, in the rows the kernel reads (PathTracer.dimensions without mixture sampling); the
+# azimuth of a diffuse sample's direction is u.bsdf[2] (see Diffuse.sample).
+VERTEX_LAYOUT = {"light": 3, "bsdf": 3, "roulette": 1}
+AZIMUTH_ROW = 5
 
 
 @dataclass
@@ -56,7 +61,7 @@ class VertexResult:
     light_samples: int
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class FusedVertex:
     """The tables and options ``ext/pt_vertex.c`` reads, for one scene and one path tracer's settings."""
 
@@ -71,7 +76,7 @@ class FusedVertex:
         BSDF (3) and roulette (1), as :meth:`PathTracer.dimensions` lays them out."""
         u = np.ascontiguousarray(u, np.float64)
         if self.needs_azimuth:
-            phi = _azimuth(u[5])
+            phi = azimuth(u[AZIMUTH_ROW])
             cos_phi, sin_phi = np.cos(phi), np.sin(phi)
         else:
             cos_phi = sin_phi = np.zeros(u.shape[1], np.float32)
@@ -91,10 +96,12 @@ def fused_vertex(tracer, scene, mode, strategy: str, heuristic: int) -> tuple[Fu
         return None, "spectral rendering"
     table = scene.materials
     for name, material in zip(table.names, table.materials):
-        if material.kind not in MATERIAL_KINDS:
+        if type(material) not in MODELS:
             return None, f"material {name!r} is {material.kind}"
     if strategy == "mixture":
         return None, "light_sampling='mixture'"
+    if tracer.dimensions(mode)[1].sizes != VERTEX_LAYOUT:
+        return None, "the vertex's numbers are laid out differently"
     lights = scene.lights
     light_tables = (None,) * 6
     if strategy in ("mis", "nee"):
@@ -106,17 +113,18 @@ def fused_vertex(tracer, scene, mode, strategy: str, heuristic: int) -> tuple[Fu
         light_tables = (area.table, area.area, area.two_sided, np.ascontiguousarray(lights.cdf(tracer.light_selection)),
                         np.ascontiguousarray(lights.pmf(tracer.light_selection)),
                         np.ascontiguousarray(area.radiance.rgb.take(area.light_of, axis=1)))
-    kinds = np.array([MATERIAL_KINDS[m.kind] for m in table.materials], dtype=np.int8)
+    kinds = np.array([MODELS[type(m)] for m in table.materials], dtype=np.int8)
     reflectance, ior = np.zeros((3, len(table))), np.ones(len(table))
     for m, material in enumerate(table.materials):   # the values MaterialLanes gathers in RGB
         tables, local = table.tables[table.kind_of[m]], table.local_id[m]
-        if material.kind == "dielectric":
+        if type(material) is Dielectric:
             ior[m] = tables["ior_reference"][local]
         else:
             reflectance[:, m] = tables["reflectance"].rgb[:, local]
     roulette = tracer.roulette
-    options = (DIFFUSE_TECHNIQUES[tracer.diffuse_sampling], heuristic, POLICIES.index(roulette.policy),
-               roulette.start_depth, TRAPPED_DEPTH, float(tracer.mis_beta), float(roulette.probability),
-               float(roulette.cap))
+    depth_limit = np.iinfo(np.int32).max   # depths are int32: a later start is never reached
+    options = (DIFFUSE_SAMPLING.index(tracer.diffuse_sampling), heuristic, POLICIES.index(roulette.policy),
+               min(roulette.start_depth, depth_limit), TRAPPED_DEPTH, float(tracer.mis_beta),
+               float(roulette.probability), float(roulette.cap))
     materials = (kinds, reflectance, ior, np.ascontiguousarray(table.albedo, np.float64))
-    return FusedVertex(materials, light_tables, bool((kinds == MATERIAL_KINDS["diffuse"]).any()), options), ""
+    return FusedVertex(materials, light_tables, bool((kinds == MODELS[Diffuse]).any()), options), ""
