@@ -13,7 +13,7 @@
  * sample_importance, which the pinhole used before (tests/test_camera_kernel.py compares them), so the
  * results are bit for bit the same.
  */
-#include "native.h"
+#include "camera.h"
 
 #define NPY_NO_DEPRECATED_API NPY_2_0_API_VERSION
 #define NO_IMPORT_ARRAY
@@ -37,6 +37,20 @@ static int vector3(PyObject *obj, const char *name, double out[3])
     return 0;
 }
 
+int ps_parse_pinhole(PyObject *const vectors[4], double tan_x, double tan_y, Py_ssize_t width, Py_ssize_t height,
+                     double lens_area, PsPinhole *cam)
+{
+    if (vector3(vectors[0], "position", cam->o) || vector3(vectors[1], "forward", cam->f) ||
+        vector3(vectors[2], "right", cam->r) || vector3(vectors[3], "image_up", cam->u))
+        return -1;
+    cam->tan_x = tan_x;
+    cam->tan_y = tan_y;
+    cam->width = (double)width;
+    cam->height = (double)height;
+    cam->lens_area = lens_area;
+    return 0;
+}
+
 PyObject *ps_pinhole_connect(PyObject *module, PyObject *args)
 {
     (void)module;
@@ -54,9 +68,8 @@ PyObject *ps_pinhole_connect(PyObject *module, PyObject *args)
         PyErr_SetString(PyExc_ValueError, "receivers must have 3 rows");
         return NULL;
     }
-    double o[3], f[3], r[3], u[3];
-    if (vector3(objs[1], "position", o) || vector3(objs[2], "forward", f) || vector3(objs[3], "right", r) ||
-        vector3(objs[4], "image_up", u))
+    PsPinhole cam;
+    if (ps_parse_pinhole(objs + 1, tan_x, tan_y, width, height, lens_area, &cam) < 0)
         return NULL;
     npy_intp n = PyArray_DIM(receivers, 1), dims_w[2] = {3, n}, dims_r[2] = {2, n};
     PyObject *out[5] = {
@@ -76,31 +89,18 @@ PyObject *ps_pinhole_connect(PyObject *module, PyObject *args)
     double *raster = (double *)PyArray_DATA((PyArrayObject *)out[2]);
     npy_bool *inside = (npy_bool *)PyArray_DATA((PyArrayObject *)out[3]);
     double *cosine = (double *)PyArray_DATA((PyArrayObject *)out[4]);
-    double film_w = (double)width, film_h = (double)height;
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp i = 0; i < n; ++i) {
-        double x[3], to_lens[3], p[3], dir[3];
-        for (int c = 0; c < 3; ++c) {
+        double x[3], dir[3], at[2];
+        int on_film;
+        for (int c = 0; c < 3; ++c)
             x[c] = wide ? x64[c * n + i] : (double)x32[c * n + i];
-            to_lens[c] = o[c] - x[c];
-            p[c] = x[c] - o[c];
-        }
-        double dist2 = (to_lens[0] * to_lens[0] + to_lens[1] * to_lens[1]) + to_lens[2] * to_lens[2];
-        double dist = sqrt(dist2);
-        for (int c = 0; c < 3; ++c) {
-            dir[c] = to_lens[c] / dist;
+        ps_join_pinhole(&cam, x, dir, pdf + i, at, &on_film, cosine + i);
+        for (int c = 0; c < 3; ++c)
             w[c * n + i] = dir[c];
-        }
-        double depth = (f[0] * p[0] + f[1] * p[1]) + f[2] * p[2];
-        double sx = (((r[0] * p[0] + r[1] * p[1]) + r[2] * p[2]) / depth) / tan_x;
-        double sy = (((u[0] * p[0] + u[1] * p[1]) + u[2] * p[2]) / depth) / tan_y;
-        double fx = ((sx + 1.0) * 0.5) * film_w, fy = ((1.0 - sy) * 0.5) * film_h;
-        raster[i] = fx;
-        raster[n + i] = fy;
-        inside[i] = depth > 0.0 && fx >= 0.0 && fx < film_w && fy >= 0.0 && fy < film_h;
-        double cos_lens = (f[0] * -dir[0] + f[1] * -dir[1]) + f[2] * -dir[2];
-        cosine[i] = cos_lens;
-        pdf[i] = dist2 / (fabs(cos_lens) * lens_area);
+        raster[i] = at[0];
+        raster[n + i] = at[1];
+        inside[i] = (npy_bool)on_film;
     }
     Py_END_ALLOW_THREADS
     return Py_BuildValue("(NNNNN)", out[0], out[1], out[2], out[3], out[4]);

@@ -101,6 +101,11 @@ static PyMethodDef module_methods[] = {
      "light_eps, normal, beta, alive, origin, direction, pdf, delta, eta_scale, light_samples): one vertex of a "
      "path tracer's walks, next-event estimation, BSDF sample and roulette in one pass (see ext/pt_vertex.c and "
      "pathspace.estimators.pt_fused)."},
+    {"lens_connect", ps_lens_connect, METH_VARARGS,
+     "lens_connect(p, n, wo, beta, material, entity, chosen, on_light, diffuse, reflectance, radiance, two_sided, "
+     "position, forward, right, image_up, tan_x, tan_y, width, height, lens_area)\n--\n\n(sent (3, K), pdf, "
+     "raster (2, K), on_film, cos): light vertices `chosen` joined to a pinhole camera, beta times what each sends "
+     "toward it (see ext/lens_connect.c and pathspace.estimators.lens_fused)."},
     {"take_lanes", ps_take_lanes, METH_VARARGS,
      "take_lanes(indices, arrays)\n--\n\nlist: numpy.take(a, indices, axis=-1) of every array a of the list `arrays` "
      "(lanes along the last axis, as many in each), in one call with the GIL released (see ext/lanes.c)."},

@@ -180,10 +180,11 @@ class PinholeCamera:
 
     def importance(self, directions: np.ndarray, lens_points: np.ndarray | None = None) -> np.ndarray:
         """We = 1 / (A lens_area cos^4 theta) for unit directions leaving lens points onto the film, else 0."""
-        return self._importance(self.cos_to_axis(directions), self._on_film(directions, lens_points))
+        return self.importance_of(self.cos_to_axis(directions), self._on_film(directions, lens_points))
 
-    def _importance(self, cos: np.ndarray, on_film: np.ndarray) -> np.ndarray:
-        """We from the cosine to the axis, where ``on_film``; else 0."""
+    def importance_of(self, cos: np.ndarray, on_film: np.ndarray) -> np.ndarray:
+        """We from the cosine ``cos`` (N,) between directions leaving the lens and the axis, where ``on_film``;
+        else 0."""
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(on_film, 1.0 / (self.image_area * self.lens_area * cos ** 4), 0.0)
 
@@ -223,7 +224,7 @@ class PinholeCamera:
         wi, pdf, raster, on_film, cos = _native.pinhole_connect(
             np.ascontiguousarray(receivers), self.position, self.forward, self.right, self.image_up,
             self.tan_half[0], self.tan_half[1], self.width, self.height, self.lens_area)
-        we = self._importance(cos, on_film)
+        we = self.importance_of(cos, on_film)
         return wi, we, pdf, self.sample_lens(u), raster, on_film & (we > 0)
 
 
@@ -307,7 +308,7 @@ class ThinLensCamera(PinholeCamera):
         wi = to_lens / dist
         raster, on_film = self.raster(receivers, lens)
         cos = self.cos_to_axis(-wi)
-        we = self._importance(cos, on_film)
+        we = self.importance_of(cos, on_film)
         with np.errstate(divide="ignore", invalid="ignore"):
             pdf = dist2 / (np.abs(cos) * self.lens_area)
         return wi, we, pdf, lens, raster, on_film & (we > 0)

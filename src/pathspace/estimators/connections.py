@@ -30,6 +30,7 @@ import numpy as np
 from ..bsdfs import MaterialLanes, Surface
 from ..mis import LIGHT_DELTA, Connections
 from ..vecmath import dot
+from .lens_fused import LensKernel
 from .subpaths import LIGHT, SURFACE, LensHits, Subpaths, Vertices, cos_at, reverse_pdf, to_area
 from .visibility import light_sample_blocked, segment_blocked
 
@@ -61,6 +62,7 @@ class Batch:
     nonfinite: int = 0  # contributions dropped because a channel or their weight was NaN or infinite
     chosen: tuple[np.ndarray, np.ndarray] | None = None   # (s, t) per lane: only that strategy (MMLT); None: all
     made: list[Contributions] | None = None  # connections made while the subpaths were walked (light tracing)
+    lens_kernel: LensKernel | None = None    # joins light vertices to the camera in C (see estimators.lens_fused)
 
     def __post_init__(self) -> None:
         self.lane_flags = self.scene.lights.flags.take(self.light.entity.take(self.light.offset[:-1]))
@@ -193,10 +195,17 @@ def lens_samples(batch: Batch, light: Subpaths | None = None) -> Contributions |
                                 & batch.wanted(light.lane, light.index + 1, 1)))
     if not y.size:
         return None
-    wi, we, pdf_lens, lens, raster, valid = camera.sample_importance(y.p, y.u)
-    value, pdf_fwd, pdf_back = _toward_lens(batch, y, on_light.take(y.v), wi, batch.densities)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        value = np.where(valid & (pdf_lens > 0), y.beta * value * (we / pdf_lens), 0.0)
+    if batch.lens_kernel is not None:   # a pinhole, and no densities: beta times what y sends, in C
+        sent, pdf_lens, raster, on_film, cos = batch.lens_kernel(light, y.v, on_light.take(y.v))
+        we = camera.importance_of(cos, on_film)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            value = np.where(on_film & (we > 0) & (pdf_lens > 0), sent * (we / pdf_lens), 0.0)
+        lens = np.broadcast_to(camera.position[:, None], (3, y.size))
+    else:
+        wi, we, pdf_lens, lens, raster, valid = camera.sample_importance(y.p, y.u)
+        value, pdf_fwd, pdf_back = _toward_lens(batch, y, on_light.take(y.v), wi, batch.densities)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            value = np.where(valid & (pdf_lens > 0), y.beta * value * (we / pdf_lens), 0.0)
     useful = batch.useful(value)
     batch.rays += useful.size
     lens32 = np.take(lens, useful, axis=1).astype(np.float32)

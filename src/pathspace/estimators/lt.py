@@ -11,7 +11,11 @@ depth by depth while they are walked, and their vertices are not kept
 (:func:`~pathspace.estimators.subpaths.stream_light_vertices`).
 
 Parameters: ``max_depth``, the roulette parameters, ``diffuse_sampling``
-and ``pyramid`` as for :mod:`pathspace.estimators.bdpt`.
+and ``pyramid`` as for :mod:`pathspace.estimators.bdpt`; ``kernel``:
+"fused" (default) joins the vertices to a pinhole camera in one C pass
+where the scene allows (see :mod:`pathspace.estimators.lens_fused`),
+"numpy" always in the NumPy code, the reference (the same image bit for
+bit).
 """
 from __future__ import annotations
 
@@ -21,10 +25,13 @@ from typing import Mapping
 import numpy as np
 
 from ..sampler import Sampler
+from ..spectra import RGBColours
+from . import parameters as p
 from .base import Counters
 from .bidirectional import Bidirectional
 from .connections import Batch, Contributions, lens_samples
 from .control import RenderControl
+from .lens_fused import lens_kernel
 from .subpaths import Subpaths, stream_light_vertices
 from .wavefront import Lanes
 
@@ -34,6 +41,8 @@ __all__ = ["LightTracer"]
 @dataclass
 class LightTracer(Bidirectional):
     """Light tracer; see the module docstring for the parameters."""
+
+    kernel: str = p.kernel("the joining of vertices to the camera")
 
     name = "lt"
     uses_camera_subpaths = False
@@ -50,6 +59,9 @@ class LightTracer(Bidirectional):
                          "are not formed (those pixels miss that light)")
         if scene.lights.environment is not None:
             lines.append("environment seen directly: not formed (an infinite light cannot be joined to the camera)")
+        fused, reason = lens_kernel(scene, RGBColours, False, self.kernel)
+        lines.append("vertices joined to the camera in one C pass (the fused kernel) in RGB, in NumPy when spectral"
+                     if fused is not None else f"vertices joined to the camera in NumPy ({reason})")
         return lines
 
     def _subpaths(self, scene, mode, pixels: np.ndarray, samplers: Mapping[str, Sampler], units: np.ndarray,
@@ -60,13 +72,14 @@ class LightTracer(Bidirectional):
         if chosen is not None:
             return super()._subpaths(scene, mode, pixels, samplers, units, counters, control, chosen)
         state, settings = self._walk_settings(scene, mode, samplers, counters, control)
+        kernel = lens_kernel(scene, settings.colours, False, self.kernel)[0]
         batch: Batch | None = None
 
         def connect(vertices: Subpaths) -> None:
             nonlocal batch
             if batch is None:  # the vertices 0, one per lane: the batch reads the lanes' lights there
                 batch = Batch(scene, vertices, None, None, settings.colours, settings.options, self.depth_limit,
-                              units, densities=False, made=[])
+                              units, densities=False, made=[], lens_kernel=kernel)
             part = lens_samples(batch, vertices)
             if part is not None:
                 batch.made.append(part)

@@ -18,7 +18,9 @@ from .base import parameter
 __all__ = ["max_depth", "roulette_policy", "roulette_depth", "roulette_probability", "roulette_cap", "light_rr",
            "light_rr_depth", "light_rr_probability", "light_rr_cap",
            "mis_heuristic", "mis_beta", "mis_strategy", "mis_strategies", "diffuse_sampling", "light_selection",
-           "light_measure", "pyramid", "underlying_rr", "underlying_rr_depth", "or_none"]
+           "light_measure", "pyramid", "underlying_rr", "underlying_rr_depth", "or_none", "KERNELS", "kernel"]
+
+KERNELS = ("fused", "numpy")
 
 
 def max_depth(default: int = -1):
@@ -137,3 +139,10 @@ def pyramid(default: int = 0):
     return parameter(default, "record each strategy's unweighted and weighted image for paths up to this many "
                               "segments (Veach's pyramid; 0: none)", partial(integer, low=0))
 
+
+
+def kernel(work: str):
+    """Where ``work`` is done: a fused C kernel (where the scene allows it) or the NumPy reference code; the
+    image is the same bit for bit, so a render resumes across the two."""
+    return parameter("fused", f"where {work} is done: 'fused' (one C pass where the scene allows; the same image) "
+                              "or 'numpy' (the reference code)", partial(choice, options=KERNELS), image=False)

@@ -79,7 +79,6 @@ from .wavefront import ItemBook, Lanes
 __all__ = ["PathTracer"]
 
 LIGHT_SAMPLING = ("mis", "nee", "none", "mixture")
-KERNELS = ("fused", "numpy")
 CAMERA_DIMENSIONS = Dimensions(pixel=2, lens=2)
 # Paths still alive after this many segments are cut and counted (``truncated`` in the stats): only
 # scenes that trap light without loss (mirror or glass enclosures) get there.
@@ -129,9 +128,7 @@ class PathTracer(Estimator):
     diffuse_sampling: str = p.diffuse_sampling()
     light_selection: str = p.light_selection()
     light_measure: str = p.light_measure()
-    kernel: str = parameter("fused", "where a vertex's work is done: 'fused' (one C pass where the scene allows; "
-                                     "the same image) or 'numpy' (the reference code)",
-                            lambda v, n: choice(v, n, KERNELS), image=False)
+    kernel: str = p.kernel("a vertex's work")
     rr: str = p.roulette_policy("throughput")
     rr_depth: int = p.roulette_depth(5)
     rr_probability: float = p.roulette_probability()

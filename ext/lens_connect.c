@@ -1,0 +1,162 @@
+/*
+ * Light vertices joined to a pinhole camera (light tracing's t = 1 strategy: pathspace.estimators.connections
+ * .lens_samples without densities, for the scenes pathspace.estimators.lens_fused serves), in one pass with the
+ * GIL released.  Per chosen vertex y of a subpath:
+ *   - the pinhole's direction w from y, its solid-angle density at y, the raster position of y, whether it is on
+ *     the film, and the cosine at the lens (ext/camera.h);
+ *   - what y sends along w (Veach 1997, eq. 10.8): at a point on an area light, its radiance toward w (0 behind
+ *     a one-sided light) times |cos| at the light; at a diffuse surface, f |cos| = albedo max(cos, 0) / pi with
+ *     the surface turned toward the vertex the walk came from (pathspace.bsdfs.Diffuse.eval);
+ *   - times y's throughput beta.
+ * The camera's importance We (its cos^4, which NumPy's power computes differently from C's pow) and the division
+ * by the pinhole's density stay in NumPy.  Every value is computed in the operations and order of the NumPy code
+ * (lens_samples and _toward_lens, which the tests keep as the reference: tests/estimators/test_lens_kernel.py),
+ * so the contributions are bit for bit the same.  RGB only.
+ */
+#include "camera.h"
+#include "warp.h"
+
+#define NPY_NO_DEPRECATED_API NPY_2_0_API_VERSION
+#define NO_IMPORT_ARRAY
+#define PY_ARRAY_UNIQUE_SYMBOL pathspace_native_ARRAY_API
+#include <numpy/arrayobject.h>
+
+#include <math.h>
+#include <stdint.h>
+
+#define CHANNELS 3
+
+enum {
+    A_P, A_N, A_WO, A_BETA, A_MATERIAL, A_ENTITY, /* the subpaths' vertices (V) */
+    A_CHOSEN, A_ON_LIGHT,                        /* the vertices joined (K) */
+    A_DIFFUSE, A_REFLECTANCE,                    /* materials (M) */
+    A_RADIANCE, A_TWO_SIDED,                     /* emitting triangles (E) */
+    A_COUNT
+};
+
+static const PsArraySpec SPECS[A_COUNT] = {
+    {"p", NPY_FLOAT, "float32", 2, 0},         {"n", NPY_FLOAT, "float32", 2, 0},
+    {"wo", NPY_FLOAT, "float32", 2, 0},        {"beta", NPY_DOUBLE, "float64", 2, 0},
+    {"material", NPY_INT64, "int64", 1, 0},    {"entity", NPY_INT64, "int64", 1, 0},
+    {"chosen", NPY_INT64, "int64", 1, 0},      {"on_light", NPY_BOOL, "bool", 1, 0},
+    {"diffuse", NPY_BOOL, "bool", 1, 0},       {"reflectance", NPY_DOUBLE, "float64", 2, 0},
+    {"radiance", NPY_DOUBLE, "float64", 2, 0}, {"two_sided", NPY_BOOL, "bool", 1, 0},
+};
+
+/* 0 if the arrays agree: (3, V) vertex vectors and (C, V) beta, (V,) materials and entities, (K,) chosen and
+ * on_light, (M,) diffuse and (3, M) reflectance, (3, E) radiance and (E,) two_sided; else -1 with a ValueError. */
+static int check_shapes(PyArrayObject **a)
+{
+    npy_intp v = PyArray_DIM(a[A_P], 1), k = PyArray_DIM(a[A_CHOSEN], 0), m = PyArray_DIM(a[A_DIFFUSE], 0),
+             e = PyArray_DIM(a[A_TWO_SIDED], 0);
+    int ok = PyArray_DIM(a[A_BETA], 0) == CHANNELS && PyArray_DIM(a[A_BETA], 1) == v &&
+             PyArray_DIM(a[A_MATERIAL], 0) == v && PyArray_DIM(a[A_ENTITY], 0) == v &&
+             PyArray_DIM(a[A_ON_LIGHT], 0) == k &&
+             PyArray_DIM(a[A_REFLECTANCE], 0) == CHANNELS && PyArray_DIM(a[A_REFLECTANCE], 1) == m &&
+             PyArray_DIM(a[A_RADIANCE], 0) == CHANNELS && PyArray_DIM(a[A_RADIANCE], 1) == e;
+    for (int j = A_P; j <= A_WO; ++j)
+        ok = ok && PyArray_DIM(a[j], 0) == 3 && PyArray_DIM(a[j], 1) == v;
+    if (!ok)
+        PyErr_SetString(PyExc_ValueError, "lens_connect: p, n and wo (3, V), beta (3, V), material and entity (V,), "
+                                          "chosen and on_light (K,), diffuse (M,) and reflectance (3, M), radiance "
+                                          "(3, E) and two_sided (E,) must agree");
+    return ok ? 0 : -1;
+}
+
+PyObject *ps_lens_connect(PyObject *module, PyObject *args)
+{
+    (void)module;
+    PyObject *objs[A_COUNT], *vectors[4];
+    double tan_x, tan_y, lens_area;
+    Py_ssize_t width, height;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOOOddnnd:lens_connect", &objs[0], &objs[1], &objs[2], &objs[3],
+                          &objs[4], &objs[5], &objs[6], &objs[7], &objs[8], &objs[9], &objs[10], &objs[11],
+                          &vectors[0], &vectors[1], &vectors[2], &vectors[3], &tan_x, &tan_y, &width, &height,
+                          &lens_area))
+        return NULL;
+    PyArrayObject *a[A_COUNT];
+    PsPinhole cam;
+    if (ps_checked_arrays(objs, SPECS, A_COUNT, (PyObject **)a) < 0 || check_shapes(a) < 0 ||
+        ps_parse_pinhole(vectors, tan_x, tan_y, width, height, lens_area, &cam) < 0)
+        return NULL;
+    npy_intp v = PyArray_DIM(a[A_P], 1), k = PyArray_DIM(a[A_CHOSEN], 0), m = PyArray_DIM(a[A_DIFFUSE], 0),
+             e = PyArray_DIM(a[A_TWO_SIDED], 0), dims[2] = {CHANNELS, k}, dims_r[2] = {2, k};
+    PyObject *out[5] = {PyArray_SimpleNew(2, dims, NPY_DOUBLE), PyArray_SimpleNew(1, &k, NPY_DOUBLE),
+                        PyArray_SimpleNew(2, dims_r, NPY_DOUBLE), PyArray_SimpleNew(1, &k, NPY_BOOL),
+                        PyArray_SimpleNew(1, &k, NPY_DOUBLE)};
+    if (!ps_outputs_allocated(out, 5))
+        return NULL;
+    const float *p = (const float *)PyArray_DATA(a[A_P]), *nn = (const float *)PyArray_DATA(a[A_N]),
+                *wo = (const float *)PyArray_DATA(a[A_WO]);
+    const double *beta = (const double *)PyArray_DATA(a[A_BETA]),
+                 *reflectance = (const double *)PyArray_DATA(a[A_REFLECTANCE]),
+                 *radiance = (const double *)PyArray_DATA(a[A_RADIANCE]);
+    const int64_t *material = (const int64_t *)PyArray_DATA(a[A_MATERIAL]),
+                  *entity = (const int64_t *)PyArray_DATA(a[A_ENTITY]),
+                  *chosen = (const int64_t *)PyArray_DATA(a[A_CHOSEN]);
+    const npy_bool *on_light = (const npy_bool *)PyArray_DATA(a[A_ON_LIGHT]),
+                   *diffuse = (const npy_bool *)PyArray_DATA(a[A_DIFFUSE]),
+                   *two_sided = (const npy_bool *)PyArray_DATA(a[A_TWO_SIDED]);
+    double *sent = (double *)PyArray_DATA((PyArrayObject *)out[0]),
+           *pdf = (double *)PyArray_DATA((PyArrayObject *)out[1]),
+           *raster = (double *)PyArray_DATA((PyArrayObject *)out[2]),
+           *cosine = (double *)PyArray_DATA((PyArrayObject *)out[4]);
+    npy_bool *inside = (npy_bool *)PyArray_DATA((PyArrayObject *)out[3]);
+    npy_intp bad = -1;
+    const char *what = NULL;
+    Py_BEGIN_ALLOW_THREADS
+    for (npy_intp j = 0; j < k; ++j) {
+        int64_t i = chosen[j]; /* every index is read once: checked, then used */
+        if (i < 0 || i >= v) {
+            bad = j, what = "chosen[%zd] is not a vertex";
+            break;
+        }
+        double x[3], w[3], at[2], value[CHANNELS];
+        float n[3];
+        int on_film;
+        for (int c = 0; c < 3; ++c) {
+            x[c] = (double)p[c * v + i];
+            n[c] = nn[c * v + i];
+        }
+        ps_join_pinhole(&cam, x, w, pdf + j, at, &on_film, cosine + j);
+        raster[j] = at[0];
+        raster[k + j] = at[1];
+        inside[j] = (npy_bool)on_film;
+        double cos_w = ((double)n[0] * w[0] + (double)n[1] * w[1]) + (double)n[2] * w[2]; /* vecmath.dot */
+        if (on_light[j]) {
+            int64_t light = entity[i];
+            if (light < 0 || light >= e) {
+                bad = j, what = "the light of chosen[%zd] is not an emitting triangle";
+                break;
+            }
+            int faces = two_sided[light] || cos_w > 0.0;
+            double cos_at = n[0] != 0.0f || n[1] != 0.0f || n[2] != 0.0f ? fabs(cos_w) : 1.0;
+            for (int c = 0; c < CHANNELS; ++c)
+                value[c] = radiance[c * e + light] * (faces ? 1.0 : 0.0) * cos_at;
+        } else {
+            int64_t id = material[i];
+            if (id < 0 || id >= m || !diffuse[id]) {
+                bad = j, what = "the material of chosen[%zd] is not a diffuse material of the table";
+                break;
+            }
+            /* Surface.facing(n, -wo), then Diffuse.eval toward w */
+            float d[3] = {-wo[i], -wo[v + i], -wo[2 * v + i]};
+            float cos_arrival = -(ps_dot3(n, d));
+            float side = cos_arrival >= 0.0f ? 1.0f : -1.0f;
+            double cos_i = ((double)(n[0] * side) * w[0] + (double)(n[1] * side) * w[1]) + (double)(n[2] * side) * w[2];
+            double cos_over_pi = (isnan(cos_i) || cos_i > 0.0 ? cos_i : 0.0) * PS_INV_PI;
+            for (int c = 0; c < CHANNELS; ++c)
+                value[c] = reflectance[c * m + id] * cos_over_pi;
+        }
+        for (int c = 0; c < CHANNELS; ++c)
+            sent[c * k + j] = beta[c * v + i] * value[c];
+    }
+    Py_END_ALLOW_THREADS
+    if (bad >= 0) {
+        for (int j = 0; j < 5; ++j)
+            Py_DECREF(out[j]);
+        PyErr_Format(PyExc_IndexError, what, (Py_ssize_t)bad);
+        return NULL;
+    }
+    return Py_BuildValue("(NNNNN)", out[0], out[1], out[2], out[3], out[4]);
+}

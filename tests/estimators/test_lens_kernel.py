@@ -1,0 +1,200 @@
+"""The light tracer's fused connections to the camera (ext/lens_connect.c) against the NumPy code they stand for.
+
+``LightTracer(kernel="fused")`` joins light vertices to a pinhole camera in one C pass where the scene allows
+(:mod:`pathspace.estimators.lens_fused`); ``kernel="numpy"`` is the reference.  Compared bit for bit (as
+integers): whole renders on scenes with diffuse, mirror and glass surfaces under several depths and roulette
+policies, with the kernel's calls counted; then the connections of made-up subpaths with extreme vertices
+(throughputs over 300 decades and zero, infinite or NaN; vertices behind, beside and right at the camera;
+surfaces seen from both sides and edge-on; points on one- and two-sided lights, in front and behind); then the
+scenes and settings left to NumPy, and the kernel's refusals.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import pathspace as ps
+from pathspace import _native
+from pathspace.estimators.connections import Batch, lens_samples
+from pathspace.estimators.lens_fused import lens_kernel
+from pathspace.estimators.lt import LightTracer
+from pathspace.estimators.subpaths import FIELDS, LIGHT, SURFACE, Subpaths
+from pathspace.spectra import RGBColours, SpectralColours
+from conftest import ROOT
+
+
+def scene(name: str, resolution=(24, 24), **overrides):
+    return ps.load_scene(ROOT / "scenes" / name / "scene.toml", **{"camera.resolution": list(resolution)},
+                         **overrides)
+
+
+def same_bits(a: np.ndarray, b: np.ndarray, what: str = "") -> None:
+    """a and b hold the same numbers bit for bit (-0.0 differs from 0.0)."""
+    a, b = np.ascontiguousarray(a), np.ascontiguousarray(b)
+    assert a.dtype == b.dtype and a.shape == b.shape, what
+    if a.dtype.kind == "f":
+        a, b = a.view(f"i{a.itemsize}"), b.view(f"i{b.itemsize}")
+    np.testing.assert_array_equal(a, b, err_msg=what)
+
+
+@pytest.fixture
+def kernel_calls(monkeypatch):
+    """The number of vertices the fused kernel joined so far (a list of one count)."""
+    joined, kernel = [0], _native.lens_connect
+
+    def counted(*args):
+        joined[0] += args[6].size
+        return kernel(*args)
+
+    monkeypatch.setattr(_native, "lens_connect", counted)
+    return joined
+
+
+CONFIGS = {
+    "default": {},
+    "short": {"max_depth": 3},
+    "rr-fixed": {"rr": "fixed", "rr_probability": 0.3, "rr_depth": 2},
+    "rr-albedo": {"rr": "albedo", "rr_depth": 1},
+    "uniform-diffuse": {"diffuse_sampling": "uniform"},
+}
+
+
+@pytest.mark.parametrize("config", CONFIGS)
+@pytest.mark.parametrize("name", ["cornell-box", "cornell-box-specular"])
+def test_fused_light_tracing_equals_numpy(name, config, kernel_calls):
+    sc = scene(name)
+    fused = ps.render(sc, "lt", spp=2, seed=5, threads=1, kernel="fused", **CONFIGS[config])
+    joined = kernel_calls[0]
+    assert joined > 0
+    numpy = ps.render(sc, "lt", spp=2, seed=5, threads=1, kernel="numpy", **CONFIGS[config])
+    assert kernel_calls[0] == joined
+    assert any("camera in one C pass" in line for line in fused.stats["plan"])
+    assert fused.stats["rays"] == numpy.stats["rays"]
+    for name in ("scaled_mean", "scaled_m2", "exponent"):
+        same_bits(getattr(fused.film.moments, name), getattr(numpy.film.moments, name), name)
+    same_bits(fused.image, numpy.image)
+
+
+@pytest.mark.parametrize("name", ["caustic-glass", "pool", "furnace"])
+def test_fused_light_tracing_equals_numpy_through_glass(name, kernel_calls):
+    sc = scene(name, (16, 16))
+    fused = ps.render(sc, "lt", spp=2, seed=5, threads=1)
+    assert kernel_calls[0] > 0
+    same_bits(fused.image, ps.render(sc, "lt", spp=2, seed=5, threads=1, kernel="numpy").image)
+
+
+# -- connections of made-up subpaths ------------------------------------------------------------------------
+
+def made_up_subpaths(sc, rng: np.random.Generator, n: int = 8000) -> Subpaths:
+    """n one-vertex-per-lane subpaths of vertices around the Cornell box's camera: on surfaces (diffuse,
+    mirror, glass; seen from both sides and edge-on) and on the light (its points, and points in front of and
+    behind it), some right at the pinhole, behind it or beside the film; throughputs over 300 decades and
+    some zero, negative zero, infinite or NaN."""
+    camera = sc.camera
+    depth = rng.uniform(0.5, 6.0, n)
+    depth[rng.random(n) < 0.05] *= -1.0                                                # behind the pinhole
+    across = rng.uniform(-1.2, 1.2, (2, n)) * depth * np.array(camera.tan_half)[:, None]   # some beside the film
+    p = (camera.position[:, None] + camera.forward[:, None] * depth + camera.right[:, None] * across[0]
+         + camera.image_up[:, None] * across[1])
+    p[:, rng.random(n) < 0.03] = camera.position[:, None]                              # at the pinhole
+    normal = rng.normal(size=(3, n))
+    normal /= np.linalg.norm(normal, axis=0)
+    wo = rng.normal(size=(3, n))
+    wo /= np.linalg.norm(wo, axis=0)
+    edge = rng.random(n) < 0.03
+    wo[:, edge] = np.cross(normal.T, rng.normal(size=(n, 3))).T[:, edge]             # edge-on (cos ~ 0)
+    wo[:, edge] /= np.linalg.norm(wo[:, edge], axis=0)
+    beta = 10.0 ** rng.uniform(-150, 150, (3, n))
+    for value in (0.0, -0.0, np.inf, np.nan):
+        beta[:, rng.random(n) < 0.01] = value
+    on_light = rng.random(n) < 0.3
+    kind = np.where(on_light & (rng.random(n) < 0.5), LIGHT, SURFACE).astype(np.int8)
+    materials = sc.materials
+    material = rng.integers(0, len(materials), n)
+    entity = np.where(on_light, rng.integers(0, sc.lights.area.count, n), -1)
+    fields = dict.fromkeys(FIELDS)
+    fields.update(lane=np.arange(n), index=rng.integers(0, 6, n), p=p.astype(np.float32),
+                  n=normal.astype(np.float32), eps=np.full(n, 1e-5, np.float32), wo=wo.astype(np.float32),
+                  beta=beta, delta=materials.delta.take(material) & (kind == SURFACE), kind=kind, material=material,
+                  entity=entity, u=rng.random((2, n)), infinite=np.zeros(n, bool))
+    return Subpaths(offset=np.arange(n + 1), terminated=np.zeros(n, bool), **fields)
+
+
+@pytest.mark.parametrize("name, seed", [("cornell-box", 1), ("cornell-box-specular", 2)])
+def test_fused_connections_equal_numpy_on_extreme_vertices(name, seed):
+    sc = scene(name)
+    light = made_up_subpaths(sc, np.random.default_rng(seed))
+    parts = {}
+    for kernel in ("fused", "numpy"):
+        fused, _ = lens_kernel(sc, RGBColours, False, kernel)
+        batch = Batch(sc, light, None, None, RGBColours, {}, 100, np.array([0, light.lane.size]), densities=False,
+                      made=[], lens_kernel=fused)
+        with np.errstate(all="ignore"):
+            parts[kernel] = (lens_samples(batch), batch.rays, batch.nonfinite)
+    (fused, rays_f, bad_f), (numpy, rays_n, bad_n) = parts["fused"], parts["numpy"]
+    assert (rays_f, bad_f) == (rays_n, bad_n) and bad_f > 0 and fused.count > 100
+    for field in ("value", "raster", "lane", "s", "t", "flags"):
+        same_bits(getattr(fused, field), getattr(numpy, field), field)
+
+
+# -- what the kernel leaves to NumPy, and its refusals -------------------------------------------------------
+
+def test_scenes_and_settings_the_kernel_does_not_serve_say_why():
+    box = scene("cornell-box")
+    cases = [
+        (scene("cornell-box-thin-lens"), RGBColours, False, "fused", "a camera other than a pinhole"),
+        (scene("cornell-box-point-light"), RGBColours, False, "fused", "lights other than area lights"),
+        (scene("veach-mis"), RGBColours, False, "fused", "material 'plate1' is conductor"),
+        (box, SpectralColours(np.full((4, 1), 550.0), None, None), False, "fused", "spectral"),
+        (box, RGBColours, True, "fused", "densities"),
+        (box, RGBColours, False, "numpy", "kernel='numpy'"),
+    ]
+    for sc, colours, densities, kernel, reason in cases:
+        fused, why = lens_kernel(sc, colours, densities, kernel)
+        assert fused is None and reason in why
+    assert lens_kernel(box, RGBColours, False, "fused")[0] is not None
+    assert any("camera in NumPy (a camera other than a pinhole)" in line
+               for line in LightTracer().plan(scene("cornell-box-thin-lens")))
+
+
+def kernel_args(k: int = 3):
+    sc = scene("cornell-box")
+    fused, _ = lens_kernel(sc, RGBColours, False, "fused")
+    v = 4
+    vectors = [np.ones((3, v), np.float32)] * 3
+    camera = sc.camera
+    return [*vectors, np.ones((3, v)), np.zeros(v, np.int64), np.zeros(v, np.int64), np.arange(k, dtype=np.int64),
+            np.zeros(k, bool), fused.diffuse, fused.reflectance, fused.radiance, fused.two_sided, camera.position,
+            camera.forward, camera.right, camera.image_up, camera.tan_half[0], camera.tan_half[1], camera.width,
+            camera.height, camera.lens_area]
+
+
+@pytest.mark.parametrize("position, value, error, match", [
+    (6, np.array([0, 4, 1]), IndexError, r"chosen\[1\] is not a vertex"),
+    (6, np.array([-1, 0, 1]), IndexError, r"chosen\[0\] is not a vertex"),
+    (4, np.full(4, 99), IndexError, r"material of chosen\[0\] is not a diffuse material"),
+    (4, np.full(4, 3), IndexError, r"material of chosen\[0\] is not a diffuse material"),
+    (0, np.ones((3, 5), np.float32), ValueError, "must agree"),
+    (3, np.ones((3, 4), np.float32), TypeError, "beta"),
+    (12, np.ones(2), ValueError, "position must have 3 entries"),
+])
+def test_lens_connect_refuses_bad_arguments(position, value, error, match):
+    args = kernel_args()
+    args[position] = value
+    if position == 4 and value[0] == 3:   # a material of the table that is not diffuse: the light's 'white'?
+        args[8] = np.zeros_like(args[8])
+    with pytest.raises(error, match=match):
+        _native.lens_connect(*args)
+
+
+def test_lens_connect_refuses_a_light_vertex_off_the_emitting_triangles():
+    args = kernel_args()
+    args[7] = np.ones(3, bool)
+    args[5] = np.full(4, 7, np.int64)
+    with pytest.raises(IndexError, match=r"light of chosen\[0\] is not an emitting triangle"):
+        _native.lens_connect(*args)
+
+
+def test_lens_connect_takes_no_vertices():
+    out = _native.lens_connect(*kernel_args(0))
+    assert out[0].shape == (3, 0) and out[2].shape == (2, 0)
