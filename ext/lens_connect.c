@@ -103,12 +103,12 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
            *cosine = (double *)PyArray_DATA((PyArrayObject *)out[4]);
     npy_bool *inside = (npy_bool *)PyArray_DATA((PyArrayObject *)out[3]);
     npy_intp bad = -1;
-    const char *what = NULL;
+    enum { BAD_VERTEX, BAD_LIGHT, BAD_MATERIAL } why = BAD_VERTEX;
     Py_BEGIN_ALLOW_THREADS
     for (npy_intp j = 0; j < k; ++j) {
         int64_t i = chosen[j]; /* every index is read once: checked, then used */
         if (i < 0 || i >= v) {
-            bad = j, what = "chosen[%zd] is not a vertex";
+            bad = j, why = BAD_VERTEX;
             break;
         }
         double x[3], w[3], at[2], value[CHANNELS];
@@ -126,7 +126,7 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
         if (on_light[j]) {
             int64_t light = entity[i];
             if (light < 0 || light >= e) {
-                bad = j, what = "the light of chosen[%zd] is not an emitting triangle";
+                bad = j, why = BAD_LIGHT;
                 break;
             }
             int faces = two_sided[light] || cos_w > 0.0;
@@ -136,7 +136,7 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
         } else {
             int64_t id = material[i];
             if (id < 0 || id >= m || !diffuse[id]) {
-                bad = j, what = "the material of chosen[%zd] is not a diffuse material of the table";
+                bad = j, why = BAD_MATERIAL;
                 break;
             }
             /* Surface.facing(n, -wo), then Diffuse.eval toward w */
@@ -155,7 +155,13 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
     if (bad >= 0) {
         for (int j = 0; j < 5; ++j)
             Py_DECREF(out[j]);
-        PyErr_Format(PyExc_IndexError, what, (Py_ssize_t)bad);
+        if (why == BAD_VERTEX)
+            PyErr_Format(PyExc_IndexError, "chosen[%zd] is not a vertex", (Py_ssize_t)bad);
+        else if (why == BAD_LIGHT)
+            PyErr_Format(PyExc_IndexError, "the light of chosen[%zd] is not an emitting triangle", (Py_ssize_t)bad);
+        else
+            PyErr_Format(PyExc_IndexError, "the material of chosen[%zd] is not a diffuse material of the table",
+                         (Py_ssize_t)bad);
         return NULL;
     }
     return Py_BuildValue("(NNNNN)", out[0], out[1], out[2], out[3], out[4]);

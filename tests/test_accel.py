@@ -182,7 +182,7 @@ def test_watertight_build_lets_no_ray_through_the_edges_of_a_closed_box():
     assert np.all(watertight.intersect(origins, directions).prim >= 0)
     assert watertight.occluded(origins, directions).all()
     # Without the robust build, Embree's faster arithmetic lets some of these rays slip through an edge: what
-    # the default guards against (README, Performance, has the rates on the shipped scenes).  This is also the
+    # the default guards against (docs/performance.md has the rates on the shipped scenes).  This is also the
     # check that watertight=False reaches Embree; should a later Embree be watertight without its robust mode,
     # the test fails, and the trade described in the docs is gone.
     fast = Accel(vertices, scene.mesh.indices, watertight=False)

@@ -68,7 +68,7 @@ class Accel(_native.Accel):
         are embreex's exactly.  False builds without it: closest hits are about 1.5x as fast on bounce rays (on
         x86, Embree's calls run with denormals flushed to zero), but a ray aimed within rounding of a shared edge
         can pass through it -- of rays aimed at the edges of the shipped scenes, 0.3-7% more miss than with the
-        watertight build (see README, Performance).  Hit distances differ from the watertight ones by up to
+        watertight build (see docs/performance.md).  Hit distances differ from the watertight ones by up to
         about 2e-5 relative.
 
     Rays are given as (3, N) arrays of origins and directions (float32 or

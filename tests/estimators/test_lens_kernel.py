@@ -5,8 +5,9 @@
 integers): whole renders on scenes with diffuse, mirror and glass surfaces under several depths and roulette
 policies, with the kernel's calls counted; then the connections of made-up subpaths with extreme vertices
 (throughputs over 300 decades and zero, infinite or NaN; vertices behind, beside and right at the camera;
-surfaces seen from both sides and edge-on; points on one- and two-sided lights, in front and behind); then the
-scenes and settings left to NumPy, and the kernel's refusals.
+surfaces seen from both sides and edge-on; no normal, NaN normals and directions; points on one- and two-sided
+lights, facing the camera or not), through the shadow rays and without them; then the scenes and settings left
+to NumPy, and the kernel's refusals.
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import pytest
 
 import pathspace as ps
 from pathspace import _native
+from pathspace.estimators import connections
 from pathspace.estimators.connections import Batch, lens_samples
 from pathspace.estimators.lens_fused import lens_kernel
 from pathspace.estimators.lt import LightTracer
@@ -86,10 +88,10 @@ def test_fused_light_tracing_equals_numpy_through_glass(name, kernel_calls):
 # -- connections of made-up subpaths ------------------------------------------------------------------------
 
 def made_up_subpaths(sc, rng: np.random.Generator, n: int = 8000) -> Subpaths:
-    """n one-vertex-per-lane subpaths of vertices around the Cornell box's camera: on surfaces (diffuse,
-    mirror, glass; seen from both sides and edge-on) and on the light (its points, and points in front of and
-    behind it), some right at the pinhole, behind it or beside the film; throughputs over 300 decades and
-    some zero, negative zero, infinite or NaN."""
+    """n one-vertex-per-lane subpaths of vertices in front of the camera: on surfaces (diffuse, mirror, glass;
+    seen from both sides and edge-on) and on the lights (facing the camera or not), some right at the pinhole,
+    behind it or beside the film, some with no normal or a NaN one or a NaN direction back; throughputs over 300
+    decades and some zero, negative zero, infinite or NaN."""
     camera = sc.camera
     depth = rng.uniform(0.5, 6.0, n)
     depth[rng.random(n) < 0.05] *= -1.0                                                # behind the pinhole
@@ -104,6 +106,9 @@ def made_up_subpaths(sc, rng: np.random.Generator, n: int = 8000) -> Subpaths:
     edge = rng.random(n) < 0.03
     wo[:, edge] = np.cross(normal.T, rng.normal(size=(n, 3))).T[:, edge]             # edge-on (cos ~ 0)
     wo[:, edge] /= np.linalg.norm(wo[:, edge], axis=0)
+    wo[:, rng.random(n) < 0.01] = np.nan
+    normal[:, rng.random(n) < 0.02] = 0.0                                              # no normal: cos_at is 1
+    normal[:, rng.random(n) < 0.01] = np.nan
     beta = 10.0 ** rng.uniform(-150, 150, (3, n))
     for value in (0.0, -0.0, np.inf, np.nan):
         beta[:, rng.random(n) < 0.01] = value
@@ -121,9 +126,17 @@ def made_up_subpaths(sc, rng: np.random.Generator, n: int = 8000) -> Subpaths:
 
 
 @pytest.mark.parametrize("name, seed", [("cornell-box", 1), ("cornell-box-specular", 2)])
-def test_fused_connections_equal_numpy_on_extreme_vertices(name, seed):
+@pytest.mark.parametrize("occlusion", [True, False])
+def test_fused_connections_equal_numpy_on_extreme_vertices(name, seed, occlusion, monkeypatch):
+    """Through the shadow rays, and without them (every vertex's value compared, the blocked ones too)."""
     sc = scene(name)
-    light = made_up_subpaths(sc, np.random.default_rng(seed))
+    rng = np.random.default_rng(seed)
+    light = made_up_subpaths(sc, rng)
+    two_sided = sc.lights.area.two_sided
+    two_sided[0] = True    # one two-sided emitting triangle, one one-sided
+    assert two_sided.any() and not two_sided.all()
+    if not occlusion:
+        monkeypatch.setattr(connections, "segment_blocked", lambda scene, a, *rest: np.zeros(a.shape[1], bool))
     parts = {}
     for kernel in ("fused", "numpy"):
         fused, _ = lens_kernel(sc, RGBColours, False, kernel)
@@ -132,7 +145,7 @@ def test_fused_connections_equal_numpy_on_extreme_vertices(name, seed):
         with np.errstate(all="ignore"):
             parts[kernel] = (lens_samples(batch), batch.rays, batch.nonfinite)
     (fused, rays_f, bad_f), (numpy, rays_n, bad_n) = parts["fused"], parts["numpy"]
-    assert (rays_f, bad_f) == (rays_n, bad_n) and bad_f > 0 and fused.count > 100
+    assert (rays_f, bad_f) == (rays_n, bad_n) and bad_f > 0 and fused.count > (1500 if not occlusion else 100)
     for field in ("value", "raster", "lane", "s", "t", "flags"):
         same_bits(getattr(fused, field), getattr(numpy, field), field)
 
@@ -173,16 +186,17 @@ def kernel_args(k: int = 3):
     (6, np.array([0, 4, 1]), IndexError, r"chosen\[1\] is not a vertex"),
     (6, np.array([-1, 0, 1]), IndexError, r"chosen\[0\] is not a vertex"),
     (4, np.full(4, 99), IndexError, r"material of chosen\[0\] is not a diffuse material"),
-    (4, np.full(4, 3), IndexError, r"material of chosen\[0\] is not a diffuse material"),
+    (8, np.zeros(3, bool), IndexError, r"material of chosen\[0\] is not a diffuse material"),
     (0, np.ones((3, 5), np.float32), ValueError, "must agree"),
+    (3, np.ones((4, 4)), ValueError, "must agree"),
+    (9, np.ones((3, 2)), ValueError, "must agree"),
+    (10, np.ones((3, 1)), ValueError, "must agree"),
     (3, np.ones((3, 4), np.float32), TypeError, "beta"),
     (12, np.ones(2), ValueError, "position must have 3 entries"),
 ])
 def test_lens_connect_refuses_bad_arguments(position, value, error, match):
     args = kernel_args()
     args[position] = value
-    if position == 4 and value[0] == 3:   # a material of the table that is not diffuse: the light's 'white'?
-        args[8] = np.zeros_like(args[8])
     with pytest.raises(error, match=match):
         _native.lens_connect(*args)
 

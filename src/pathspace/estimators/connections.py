@@ -195,7 +195,7 @@ def lens_samples(batch: Batch, light: Subpaths | None = None) -> Contributions |
                                 & batch.wanted(light.lane, light.index + 1, 1)))
     if not y.size:
         return None
-    if batch.lens_kernel is not None:   # a pinhole, and no densities: beta times what y sends, in C
+    if batch.lens_kernel is not None and not batch.densities:   # a pinhole: beta times what y sends, in C
         sent, pdf_lens, raster, on_film, cos = batch.lens_kernel(light, y.v, on_light.take(y.v))
         we = camera.importance_of(cos, on_film)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -210,16 +210,16 @@ def lens_samples(batch: Batch, light: Subpaths | None = None) -> Contributions |
     batch.rays += useful.size
     lens32 = np.take(lens, useful, axis=1).astype(np.float32)
     axis = np.repeat(camera.forward.astype(np.float32)[:, None], useful.size, axis=1)
-    blocked = segment_blocked(scene, np.take(y.p, useful, axis=1), y.eps.take(useful), np.take(y.n, useful, axis=1),
-                              lens32, np.zeros(useful.size, np.float32),
-                              axis if not camera.delta_position else np.zeros_like(axis))
-    useful = useful[~blocked]
+    ys = y.keep(useful)   # gathers only the useful vertices' fields (those y has not gathered yet)
+    unblocked = np.flatnonzero(~segment_blocked(scene, ys.p, ys.eps, ys.n, lens32, np.zeros(useful.size, np.float32),
+                                                axis if not camera.delta_position else np.zeros_like(axis)))
+    useful = useful[unblocked]
     if not useful.size:
         return None
     if not batch.densities:
-        lane = y.lane.take(useful)
-        return Contributions.make(lane, y.index.take(useful) + 1, 1, np.take(value, useful, axis=1),
-                                  raster=np.take(raster, useful, axis=1), flags=batch.lane_flags.take(lane))
+        ys = ys.keep(unblocked)
+        return Contributions.make(ys.lane, ys.index + 1, 1, np.take(value, useful, axis=1),
+                                  raster=np.take(raster, useful, axis=1), flags=batch.lane_flags.take(ys.lane))
     y, value = y.keep(useful), np.take(value, useful, axis=1)
     wi, lens = np.take(wi, useful, axis=1), np.take(lens, useful, axis=1)
     pdf_fwd, pdf_back, we = pdf_fwd[useful], pdf_back[useful], we[useful]

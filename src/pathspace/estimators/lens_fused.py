@@ -15,6 +15,9 @@ the NumPy code does (which stays the reference and serves every other case):
   :data:`pathspace.estimators.pt_fused.MODELS`; the vertices joined are the
   non-specular ones, so diffuse).
 
+Area lights are the first entities of a scene's lights, so a vertex on a
+light indexes the emitting triangles' tables by its entity.
+
 :func:`lens_kernel` says whether a scene and settings are served, and why not.
 """
 from __future__ import annotations
@@ -28,7 +31,7 @@ from ..bsdfs import Diffuse
 from ..camera import PinholeCamera
 from ..lights import AreaLight
 from ..spectra import RGBColours
-from .pt_fused import MODELS
+from .pt_fused import emitter_radiance, material_rgb, unserved_material
 
 __all__ = ["LensKernel", "lens_kernel"]
 
@@ -72,13 +75,9 @@ def lens_kernel(scene, colours, densities: bool, kernel: str) -> tuple[LensKerne
     if scene.lights.models != [AreaLight]:
         return None, "lights other than area lights"
     table = scene.materials
-    for name, material in zip(table.names, table.materials):
-        if type(material) not in MODELS:
-            return None, f"material {name!r} is {material.kind}"
-    diffuse = np.array([type(m) is Diffuse for m in table.materials])
-    reflectance = np.zeros((3, len(table)))
-    for m in np.flatnonzero(diffuse):   # the values MaterialLanes gathers in RGB
-        reflectance[:, m] = table.tables[table.kind_of[m]]["reflectance"].rgb[:, table.local_id[m]]
-    area = scene.lights.area
-    return LensKernel(diffuse, reflectance, np.ascontiguousarray(area.radiance.rgb.take(area.light_of, axis=1)),
-                      np.ascontiguousarray(area.two_sided), scene.camera), ""
+    reason = unserved_material(table)
+    if reason:
+        return None, reason
+    diffuse = np.array([type(m) is Diffuse for m in table.materials], dtype=bool)
+    return LensKernel(diffuse, material_rgb(table)[0], emitter_radiance(scene.lights),
+                      np.ascontiguousarray(scene.lights.area.two_sided), scene.camera), ""

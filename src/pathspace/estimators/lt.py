@@ -72,7 +72,7 @@ class LightTracer(Bidirectional):
         if chosen is not None:
             return super()._subpaths(scene, mode, pixels, samplers, units, counters, control, chosen)
         state, settings = self._walk_settings(scene, mode, samplers, counters, control)
-        kernel = lens_kernel(scene, settings.colours, False, self.kernel)[0]
+        kernel = lens_kernel(scene, settings.colours, settings.densities, self.kernel)[0]
         batch: Batch | None = None
 
         def connect(vertices: Subpaths) -> None:

@@ -140,7 +140,6 @@ def pyramid(default: int = 0):
                               "segments (Veach's pyramid; 0: none)", partial(integer, low=0))
 
 
-
 def kernel(work: str):
     """Where ``work`` is done: a fused C kernel (where the scene allows it) or the NumPy reference code; the
     image is the same bit for bit, so a render resumes across the two."""

@@ -26,7 +26,8 @@ from ..roulette import POLICIES, TRAPPED_DEPTH
 from ..spectra import RGBMode
 from ..warp import azimuth
 
-__all__ = ["MODELS", "FusedVertex", "VertexResult", "fused_vertex"]
+__all__ = ["MODELS", "FusedVertex", "VertexResult", "emitter_radiance", "fused_vertex", "material_rgb",
+           "unserved_material"]
 
 # The material models the kernel implements (these classes, not subclasses), by the numbers ext/pt_vertex.c
 # gives their kinds.
@@ -95,9 +96,9 @@ def fused_vertex(tracer, scene, mode, strategy: str, heuristic: int) -> tuple[Fu
     if not isinstance(mode, RGBMode):
         return None, "spectral rendering"
     table = scene.materials
-    for name, material in zip(table.names, table.materials):
-        if type(material) not in MODELS:
-            return None, f"material {name!r} is {material.kind}"
+    reason = unserved_material(table)
+    if reason:
+        return None, reason
     if strategy == "mixture":
         return None, "light_sampling='mixture'"
     if tracer.dimensions(mode)[1].sizes != VERTEX_LAYOUT:
@@ -111,16 +112,9 @@ def fused_vertex(tracer, scene, mode, strategy: str, heuristic: int) -> tuple[Fu
             return None, f"light_measure={tracer.light_measure!r}"
         area = lights.area
         light_tables = (area.table, area.area, area.two_sided, np.ascontiguousarray(lights.cdf(tracer.light_selection)),
-                        np.ascontiguousarray(lights.pmf(tracer.light_selection)),
-                        np.ascontiguousarray(area.radiance.rgb.take(area.light_of, axis=1)))
+                        np.ascontiguousarray(lights.pmf(tracer.light_selection)), emitter_radiance(lights))
     kinds = np.array([MODELS[type(m)] for m in table.materials], dtype=np.int8)
-    reflectance, ior = np.zeros((3, len(table))), np.ones(len(table))
-    for m, material in enumerate(table.materials):   # the values MaterialLanes gathers in RGB
-        tables, local = table.tables[table.kind_of[m]], table.local_id[m]
-        if type(material) is Dielectric:
-            ior[m] = tables["ior_reference"][local]
-        else:
-            reflectance[:, m] = tables["reflectance"].rgb[:, local]
+    reflectance, ior = material_rgb(table)
     roulette = tracer.roulette
     depth_limit = np.iinfo(np.int32).max   # depths are int32: a later start is never reached
     options = (DIFFUSE_SAMPLING.index(tracer.diffuse_sampling), heuristic, POLICIES.index(roulette.policy),
@@ -128,3 +122,31 @@ def fused_vertex(tracer, scene, mode, strategy: str, heuristic: int) -> tuple[Fu
                float(roulette.probability), float(roulette.cap))
     materials = (kinds, reflectance, ior, np.ascontiguousarray(table.albedo, np.float64))
     return FusedVertex(materials, light_tables, bool((kinds == MODELS[Diffuse]).any()), options), ""
+
+
+def unserved_material(table) -> str:
+    """Why the fused kernels cannot render the materials of ``table`` (a MaterialTable), or "" if they can."""
+    for name, material in zip(table.names, table.materials):
+        if type(material) not in MODELS:
+            return f"material {name!r} is {material.kind}"
+    return ""
+
+
+def material_rgb(table) -> tuple[np.ndarray, np.ndarray]:
+    """(reflectance (3, M), interior index (M,)) of the materials of ``table``, the values MaterialLanes gathers
+    in RGB (reflectance 0 for dielectrics, index 1 for the others)."""
+    reflectance, ior = np.zeros((3, len(table))), np.ones(len(table))
+    for m, material in enumerate(table.materials):
+        tables, local = table.tables[table.kind_of[m]], table.local_id[m]
+        if type(material) is Dielectric:
+            ior[m] = tables["ior_reference"][local]
+        else:
+            reflectance[:, m] = tables["reflectance"].rgb[:, local]
+    return reflectance, ior
+
+
+def emitter_radiance(lights) -> np.ndarray:
+    """RGB radiance (3, E) of every emitting triangle of ``lights`` (a LightSet).  Area lights are the first
+    entities of a LightSet, so emitting triangle e is entity e."""
+    area = lights.area
+    return np.ascontiguousarray(area.radiance.rgb.take(area.light_of, axis=1))
