@@ -36,8 +36,10 @@ typedef struct {
  * (NumPy's searchsorted(side="right"), NaN sorting last). */
 static inline Py_ssize_t ps_entries_at_most(const double *cdf, Py_ssize_t n, double x)
 {
-    if (isnan(x) || n < 1)
-        return isnan(x) ? n : 0;
+    if (isnan(x))
+        return n;
+    if (n < 1)
+        return 0;
     /* the count lies in lo .. lo + len; halving without branches on the (random) comparisons */
     Py_ssize_t lo = 0, len = n;
     while (len > 1) {

@@ -30,6 +30,37 @@ def cornell_file(folder, width: int, height: int):
     return scene
 
 
+def repository_scene(name: str, resolution=(24, 24), **overrides) -> ps.Scene:
+    """The scene ``scenes/NAME/scene.toml`` loaded at ``resolution`` (with any other overrides)."""
+    return ps.load_scene(ROOT / "scenes" / name / "scene.toml", **{"camera.resolution": list(resolution)},
+                         **overrides)
+
+
+def same_bits(a: np.ndarray, b: np.ndarray, what: str = "") -> None:
+    """a and b hold the same numbers bit for bit (compared as integers: -0.0 differs from 0.0, and NaNs of the
+    same payload agree)."""
+    a, b = np.ascontiguousarray(a), np.ascontiguousarray(b)
+    assert a.dtype == b.dtype and a.shape == b.shape, what
+    if a.dtype.kind == "f":
+        a, b = a.view(f"i{a.itemsize}"), b.view(f"i{b.itemsize}")
+    np.testing.assert_array_equal(a, b, err_msg=what)
+
+
+def count_lanes(monkeypatch, kernel: str, argument: int) -> list[int]:
+    """Wrap ``_native.<kernel>`` so that it counts the lanes it is given (the size of its positional
+    ``argument``); returns the count, a list of one number that grows with each call."""
+    from pathspace import _native
+
+    lanes, original = [0], getattr(_native, kernel)
+
+    def counted(*args):
+        lanes[0] += args[argument].size
+        return original(*args)
+
+    monkeypatch.setattr(_native, kernel, counted)
+    return lanes
+
+
 def scene_dict(name: str, resolution=(32, 32)) -> dict:
     """The scene file ``scenes/NAME/scene.toml`` as a dict, with another resolution."""
     data = tomllib.loads((ROOT / "scenes" / name / "scene.toml").read_text())

@@ -22,34 +22,14 @@ from pathspace.estimators.lens_fused import lens_kernel
 from pathspace.estimators.lt import LightTracer
 from pathspace.estimators.subpaths import FIELDS, LIGHT, SURFACE, Subpaths
 from pathspace.spectra import RGBColours, SpectralColours
-from conftest import ROOT
-
-
-def scene(name: str, resolution=(24, 24), **overrides):
-    return ps.load_scene(ROOT / "scenes" / name / "scene.toml", **{"camera.resolution": list(resolution)},
-                         **overrides)
-
-
-def same_bits(a: np.ndarray, b: np.ndarray, what: str = "") -> None:
-    """a and b hold the same numbers bit for bit (-0.0 differs from 0.0)."""
-    a, b = np.ascontiguousarray(a), np.ascontiguousarray(b)
-    assert a.dtype == b.dtype and a.shape == b.shape, what
-    if a.dtype.kind == "f":
-        a, b = a.view(f"i{a.itemsize}"), b.view(f"i{b.itemsize}")
-    np.testing.assert_array_equal(a, b, err_msg=what)
+from conftest import count_lanes, same_bits
+from conftest import repository_scene as scene
 
 
 @pytest.fixture
 def kernel_calls(monkeypatch):
     """The number of vertices the fused kernel joined so far (a list of one count)."""
-    joined, kernel = [0], _native.lens_connect
-
-    def counted(*args):
-        joined[0] += args[6].size
-        return kernel(*args)
-
-    monkeypatch.setattr(_native, "lens_connect", counted)
-    return joined
+    return count_lanes(monkeypatch, "lens_connect", 6)
 
 
 CONFIGS = {

@@ -29,7 +29,8 @@ from pathspace.roulette import TRAPPED_DEPTH
 from pathspace.sampler import ReplaySampler
 from pathspace.spectra import RGBMode, SpectralMode
 
-from conftest import ROOT
+from conftest import count_lanes, same_bits
+from conftest import repository_scene as scene
 
 CONFIGS = {
     "default": {},
@@ -47,30 +48,10 @@ CONFIGS = {
 }
 
 
-def scene(name: str, resolution=(24, 24)):
-    return ps.load_scene(ROOT / "scenes" / name / "scene.toml", **{"camera.resolution": list(resolution)})
-
-
-def same_bits(a: np.ndarray, b: np.ndarray, what: str = "") -> None:
-    """a and b hold the same numbers bit for bit (-0.0 differs from 0.0; NaNs of the same payload agree)."""
-    a, b = np.ascontiguousarray(a), np.ascontiguousarray(b)
-    assert a.dtype == b.dtype and a.shape == b.shape, what
-    if a.dtype.kind == "f":
-        a, b = a.view(f"i{a.itemsize}"), b.view(f"i{b.itemsize}")
-    np.testing.assert_array_equal(a, b, err_msg=what)
-
-
 @pytest.fixture
 def kernel_calls(monkeypatch):
     """The number of lanes the fused kernel took so far (a list of one count)."""
-    lanes, kernel = [0], _native.pt_vertex
-
-    def counted(*args):
-        lanes[0] += args[18].size
-        return kernel(*args)
-
-    monkeypatch.setattr(_native, "pt_vertex", counted)
-    return lanes
+    return count_lanes(monkeypatch, "pt_vertex", 18)
 
 
 def render(sc, **params):

@@ -35,7 +35,7 @@ MODELS = {model: _native.PT_VERTEX_KINDS.index(model.kind) for model in (Diffuse
 # The numbers of a vertex, in the rows the kernel reads (PathTracer.dimensions without mixture sampling); the
 # azimuth of a diffuse sample's direction is u.bsdf[2] (see Diffuse.sample).
 VERTEX_LAYOUT = {"light": 3, "bsdf": 3, "roulette": 1}
-AZIMUTH_ROW = 5
+AZIMUTH_ROW = VERTEX_LAYOUT["light"] + 2
 
 
 @dataclass
