@@ -17,8 +17,8 @@ typedef struct {
 } PsPinhole;
 
 /* For the receiver x: the unit direction w to the pinhole, the pinhole's solid-angle density at x, the raster
- * position of x and whether it is on the film, and the cosine at the lens. */
-static inline void ps_join_pinhole(const PsPinhole *cam, const double x[3], double w[3], double *pdf,
+ * position of x and whether it is on the film, and the cosine at the lens; returns the squared distance. */
+static inline double ps_join_pinhole(const PsPinhole *cam, const double x[3], double w[3], double *pdf,
                                    double raster[2], int *on_film, double *cos_lens)
 {
     double to_lens[3], p[3];
@@ -40,6 +40,7 @@ static inline void ps_join_pinhole(const PsPinhole *cam, const double x[3], doub
     *on_film = depth > 0.0 && fx >= 0.0 && fx < cam->width && fy >= 0.0 && fy < cam->height;
     *cos_lens = (f[0] * -w[0] + f[1] * -w[1]) + f[2] * -w[2];
     *pdf = dist2 / (fabs(*cos_lens) * cam->lens_area);
+    return dist2;
 }
 
 /* Fill cam from the Python arguments position, forward, right, image_up (three floats each) and the scalars;

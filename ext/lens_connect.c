@@ -1,20 +1,27 @@
 /*
- * Light vertices joined to a pinhole camera (light tracing's t = 1 strategy: pathspace.estimators.connections
- * .lens_samples without densities, for the scenes pathspace.estimators.lens_fused serves), in one pass with the
- * GIL released.  Per chosen vertex y of a subpath:
+ * Light vertices joined to a pinhole camera (the t = 1 strategy: pathspace.estimators.connections.lens_samples,
+ * for the scenes pathspace.estimators.lens_fused serves), in one pass with the GIL released.  Per chosen vertex y
+ * of a subpath:
  *   - the pinhole's direction w from y, its solid-angle density at y, the raster position of y, whether it is on
  *     the film, and the cosine at the lens (ext/camera.h);
  *   - what y sends along w (Veach 1997, eq. 10.8): at a point on an area light, its radiance toward w (0 behind
  *     a one-sided light) times |cos| at the light; at a diffuse surface, f |cos| = albedo max(cos, 0) / pi with
  *     the surface turned toward the vertex the walk came from (pathspace.bsdfs.Diffuse.eval);
- *   - times y's throughput beta.
- * The camera's importance We (its cos^4, which NumPy's power computes differently from C's pow) and the division
- * by the pinhole's density stay in NumPy.  Every value is computed in the operations and order of the NumPy code
- * (lens_samples and _toward_lens, which the tests keep as the reference: tests/estimators/test_lens_kernel.py),
- * so the contributions are bit for bit the same.  RGB only.
+ *   - times y's throughput beta;
+ *   - for BDPT, given the vertices' roulette survivals q, q_rev and g_prev (else None), the MIS densities the
+ *     join changes (ext/mis.c): pt_rev, the density with which y samples w (the light's cosine-weighted
+ *     emission, or the BSDF's technique) times q, in area measure at the pinhole (|cos| at the lens / d^2;
+ *     Veach 1997, eq. 8.10); qs_minus_rev, the density with which y samples its predecessor with light arriving
+ *     from the lens (0 on a light) times q_rev and g_prev (eq. 10.7); and |cos| at y and d^2, which turn the
+ *     camera's density at y (from its importance) into area measure.
+ * The camera's importance We (its cos^4, which NumPy's power computes differently from C's pow), the division
+ * by the pinhole's density and the camera's density at y stay in NumPy.  Every value is computed in the
+ * operations and order of the NumPy code (lens_samples, _toward_lens and the lights' pdf_le, which the tests keep
+ * as the reference: tests/estimators/test_lens_kernel.py), so the contributions and densities are bit for bit
+ * the same.  RGB only.
  */
 #include "camera.h"
-#include "warp.h"
+#include "diffuse.h"
 
 #define NPY_NO_DEPRECATED_API NPY_2_0_API_VERSION
 #define NO_IMPORT_ARRAY
@@ -33,6 +40,23 @@ enum {
     A_RADIANCE, A_TWO_SIDED,                     /* emitting triangles (E) */
     A_COUNT
 };
+/* The vertices' densities, for BDPT (V each; all None for light tracing). */
+enum { D_Q, D_Q_REV, D_G_PREV, D_COUNT };
+
+static const PsArraySpec DENSITY_SPECS[D_COUNT] = {
+    {"q", NPY_DOUBLE, "float64", 1, 1}, {"q_rev", NPY_DOUBLE, "float64", 1, 1}, {"g_prev", NPY_DOUBLE, "float64", 1, 1},
+};
+
+/* The density with which a diffuse surface (geometric normal n, previous vertex along wo) samples wo when light
+ * arrives along -w (subpaths.reverse_pdf: Surface.facing(n, -w) in float64, then Diffuse.eval in float32). */
+static inline double reverse_pdf(int technique, const float n[3], const double w[3], const float wo[3])
+{
+    double cos = -(((double)n[0] * -w[0] + (double)n[1] * -w[1]) + (double)n[2] * -w[2]);
+    float side = cos >= 0.0 ? 1.0f : -1.0f, nf[3] = {n[0] * side, n[1] * side, n[2] * side};
+    double pdf;
+    ps_diffuse_eval(technique, nf, wo, &pdf);
+    return pdf;
+}
 
 static const PsArraySpec SPECS[A_COUNT] = {
     {"p", NPY_FLOAT, "float32", 2, 0},         {"n", NPY_FLOAT, "float32", 2, 0},
@@ -66,25 +90,42 @@ static int check_shapes(PyArrayObject **a)
 PyObject *ps_lens_connect(PyObject *module, PyObject *args)
 {
     (void)module;
-    PyObject *objs[A_COUNT], *vectors[4];
+    PyObject *objs[A_COUNT], *vectors[4], *density_objs[D_COUNT];
     double tan_x, tan_y, lens_area;
     Py_ssize_t width, height;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOOOddnnd:lens_connect", &objs[0], &objs[1], &objs[2], &objs[3],
+    int technique;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOOOddnndiOOO:lens_connect", &objs[0], &objs[1], &objs[2], &objs[3],
                           &objs[4], &objs[5], &objs[6], &objs[7], &objs[8], &objs[9], &objs[10], &objs[11],
                           &vectors[0], &vectors[1], &vectors[2], &vectors[3], &tan_x, &tan_y, &width, &height,
-                          &lens_area))
+                          &lens_area, &technique, &density_objs[0], &density_objs[1], &density_objs[2]))
         return NULL;
-    PyArrayObject *a[A_COUNT];
+    PyArrayObject *a[A_COUNT], *da[D_COUNT];
     PsPinhole cam;
     if (ps_checked_arrays(objs, SPECS, A_COUNT, (PyObject **)a) < 0 || check_shapes(a) < 0 ||
         ps_parse_pinhole(vectors, tan_x, tan_y, width, height, lens_area, &cam) < 0)
         return NULL;
     npy_intp v = PyArray_DIM(a[A_P], 1), k = PyArray_DIM(a[A_CHOSEN], 0), m = PyArray_DIM(a[A_DIFFUSE], 0),
              e = PyArray_DIM(a[A_TWO_SIDED], 0), dims[2] = {CHANNELS, k}, dims_r[2] = {2, k};
-    PyObject *out[5] = {PyArray_SimpleNew(2, dims, NPY_DOUBLE), PyArray_SimpleNew(1, &k, NPY_DOUBLE),
+    if (ps_checked_arrays(density_objs, DENSITY_SPECS, D_COUNT, (PyObject **)da) < 0)
+        return NULL;
+    int densities = da[D_Q] != NULL;
+    for (int j = 0; j < D_COUNT; ++j)
+        if ((da[j] != NULL) != densities || (densities && PyArray_DIM(da[j], 0) != v)) {
+            PyErr_SetString(PyExc_ValueError, "lens_connect: q, q_rev and g_prev must all be None or all (V,)");
+            return NULL;
+        }
+    if (technique != DIFFUSE_COSINE && technique != DIFFUSE_UNIFORM) {
+        PyErr_Format(PyExc_ValueError, "lens_connect: technique must be %d (cosine) or %d (uniform), got %d",
+                     DIFFUSE_COSINE, DIFFUSE_UNIFORM, technique);
+        return NULL;
+    }
+    int outputs = densities ? 9 : 5;
+    PyObject *out[9] = {PyArray_SimpleNew(2, dims, NPY_DOUBLE), PyArray_SimpleNew(1, &k, NPY_DOUBLE),
                         PyArray_SimpleNew(2, dims_r, NPY_DOUBLE), PyArray_SimpleNew(1, &k, NPY_BOOL),
-                        PyArray_SimpleNew(1, &k, NPY_DOUBLE)};
-    if (!ps_outputs_allocated(out, 5))
+                        PyArray_SimpleNew(1, &k, NPY_DOUBLE), NULL, NULL, NULL, NULL};
+    for (int j = 5; j < outputs; ++j)
+        out[j] = PyArray_SimpleNew(1, &k, NPY_DOUBLE);
+    if (!ps_outputs_allocated(out, outputs))
         return NULL;
     const float *p = (const float *)PyArray_DATA(a[A_P]), *nn = (const float *)PyArray_DATA(a[A_N]),
                 *wo = (const float *)PyArray_DATA(a[A_WO]);
@@ -97,10 +138,17 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
     const npy_bool *on_light = (const npy_bool *)PyArray_DATA(a[A_ON_LIGHT]),
                    *diffuse = (const npy_bool *)PyArray_DATA(a[A_DIFFUSE]),
                    *two_sided = (const npy_bool *)PyArray_DATA(a[A_TWO_SIDED]);
+    const double *q = densities ? (const double *)PyArray_DATA(da[D_Q]) : NULL,
+                 *q_rev = densities ? (const double *)PyArray_DATA(da[D_Q_REV]) : NULL,
+                 *g_prev = densities ? (const double *)PyArray_DATA(da[D_G_PREV]) : NULL;
     double *sent = (double *)PyArray_DATA((PyArrayObject *)out[0]),
            *pdf = (double *)PyArray_DATA((PyArrayObject *)out[1]),
            *raster = (double *)PyArray_DATA((PyArrayObject *)out[2]),
            *cosine = (double *)PyArray_DATA((PyArrayObject *)out[4]);
+    double *pt_rev = densities ? (double *)PyArray_DATA((PyArrayObject *)out[5]) : NULL,
+           *qs_minus_rev = densities ? (double *)PyArray_DATA((PyArrayObject *)out[6]) : NULL,
+           *cos_y = densities ? (double *)PyArray_DATA((PyArrayObject *)out[7]) : NULL,
+           *distance2 = densities ? (double *)PyArray_DATA((PyArrayObject *)out[8]) : NULL;
     npy_bool *inside = (npy_bool *)PyArray_DATA((PyArrayObject *)out[3]);
     npy_intp bad = -1;
     enum { BAD_VERTEX, BAD_LIGHT, BAD_MATERIAL } why = BAD_VERTEX;
@@ -111,18 +159,19 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
             bad = j, why = BAD_VERTEX;
             break;
         }
-        double x[3], w[3], at[2], value[CHANNELS];
+        double x[3], w[3], at[2], value[CHANNELS], pdf_fwd, pdf_back = 0.0;
         float n[3];
         int on_film;
         for (int c = 0; c < 3; ++c) {
             x[c] = (double)p[c * v + i];
             n[c] = nn[c * v + i];
         }
-        ps_join_pinhole(&cam, x, w, pdf + j, at, &on_film, cosine + j);
+        double dist2 = ps_join_pinhole(&cam, x, w, pdf + j, at, &on_film, cosine + j);
         raster[j] = at[0];
         raster[k + j] = at[1];
         inside[j] = (npy_bool)on_film;
         double cos_w = ((double)n[0] * w[0] + (double)n[1] * w[1]) + (double)n[2] * w[2]; /* vecmath.dot */
+        double cos_at = n[0] != 0.0f || n[1] != 0.0f || n[2] != 0.0f ? fabs(cos_w) : 1.0; /* subpaths.cos_at */
         if (on_light[j]) {
             int64_t light = entity[i];
             if (light < 0 || light >= e) {
@@ -130,9 +179,10 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
                 break;
             }
             int faces = two_sided[light] || cos_w > 0.0;
-            double cos_at = n[0] != 0.0f || n[1] != 0.0f || n[2] != 0.0f ? fabs(cos_w) : 1.0;
             for (int c = 0; c < CHANNELS; ++c)
                 value[c] = radiance[c * e + light] * (faces ? 1.0 : 0.0) * cos_at;
+            /* AreaLight.pdf_le: cosine-weighted emission, over both sides of a two-sided light */
+            pdf_fwd = (two_sided[light] ? fabs(cos_w) * 0.5 : (isnan(cos_w) || cos_w > 0.0 ? cos_w : 0.0)) * PS_INV_PI;
         } else {
             int64_t id = material[i];
             if (id < 0 || id >= m || !diffuse[id]) {
@@ -140,20 +190,29 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
                 break;
             }
             /* Surface.facing(n, -wo), then Diffuse.eval toward w */
-            float d[3] = {-wo[i], -wo[v + i], -wo[2 * v + i]};
+            float d[3] = {-wo[i], -wo[v + i], -wo[2 * v + i]}, back[3] = {wo[i], wo[v + i], wo[2 * v + i]};
             float cos_arrival = -(ps_dot3(n, d));
             float side = cos_arrival >= 0.0f ? 1.0f : -1.0f;
             double cos_i = ((double)(n[0] * side) * w[0] + (double)(n[1] * side) * w[1]) + (double)(n[2] * side) * w[2];
             double cos_over_pi = (isnan(cos_i) || cos_i > 0.0 ? cos_i : 0.0) * PS_INV_PI;
             for (int c = 0; c < CHANNELS; ++c)
                 value[c] = reflectance[c * m + id] * cos_over_pi;
+            pdf_fwd = technique == DIFFUSE_COSINE ? cos_over_pi : (cos_i > 0.0 ? PS_INV_TWO_PI : 0.0);
+            if (densities)
+                pdf_back = reverse_pdf(technique, n, w, back);
         }
         for (int c = 0; c < CHANNELS; ++c)
             sent[c * k + j] = beta[c * v + i] * value[c];
+        if (densities) {
+            pt_rev[j] = dist2 > 0.0 ? pdf_fwd * q[i] * fabs(cosine[j]) / dist2 : 0.0;
+            qs_minus_rev[j] = pdf_back * q_rev[i] * g_prev[i];
+            cos_y[j] = cos_at;
+            distance2[j] = dist2;
+        }
     }
     Py_END_ALLOW_THREADS
     if (bad >= 0) {
-        for (int j = 0; j < 5; ++j)
+        for (int j = 0; j < outputs; ++j)
             Py_DECREF(out[j]);
         if (why == BAD_VERTEX)
             PyErr_Format(PyExc_IndexError, "chosen[%zd] is not a vertex", (Py_ssize_t)bad);
@@ -164,5 +223,7 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
                          (Py_ssize_t)bad);
         return NULL;
     }
+    if (densities)
+        return Py_BuildValue("(NNNNNNNNN)", out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7], out[8]);
     return Py_BuildValue("(NNNNN)", out[0], out[1], out[2], out[3], out[4]);
 }

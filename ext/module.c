@@ -103,9 +103,15 @@ static PyMethodDef module_methods[] = {
      "pathspace.estimators.pt_fused)."},
     {"lens_connect", ps_lens_connect, METH_VARARGS,
      "lens_connect(p, n, wo, beta, material, entity, chosen, on_light, diffuse, reflectance, radiance, two_sided, "
-     "position, forward, right, image_up, tan_x, tan_y, width, height, lens_area)\n--\n\n(sent (3, K), pdf, "
-     "raster (2, K), on_film, cos): light vertices `chosen` joined to a pinhole camera, beta times what each sends "
-     "toward it (see ext/lens_connect.c and pathspace.estimators.lens_fused)."},
+     "position, forward, right, image_up, tan_x, tan_y, width, height, lens_area, technique, q, q_rev, g_prev)\n--"
+     "\n\n(sent (3, K), pdf, raster (2, K), on_film, cos[, pt_rev, qs_minus_rev, cos_y, dist2]): light vertices "
+     "`chosen` joined to a pinhole camera, beta times what each sends toward it, and with q, q_rev and g_prev (not "
+     "None) the MIS densities (see ext/lens_connect.c and pathspace.estimators.lens_fused)."},
+    {"join_vertices", ps_join_vertices, METH_VARARGS,
+     "join_vertices(light p, n, wo, beta, material, q, q_rev, g_prev, camera p, n, wo, beta, material, q, q_rev, "
+     "g_prev, y, z, diffuse, reflectance, technique)\n--\n\n(value (3, K), qs_rev, qs_minus_rev, pt_rev, "
+     "pt_minus_rev): light vertices y joined to camera vertices z, the unweighted contributions and the densities "
+     "MIS reads (see ext/join.c and pathspace.estimators.join_fused)."},
     {"take_lanes", ps_take_lanes, METH_VARARGS,
      "take_lanes(indices, arrays)\n--\n\nlist: numpy.take(a, indices, axis=-1) of every array a of the list `arrays` "
      "(lanes along the last axis, as many in each), in one call with the GIL released (see ext/lanes.c)."},

@@ -13,6 +13,7 @@
  * reference: every value is computed in the operations and order of the NumPy code, so that a render through
  * this kernel is bit for bit the render through NumPy (tests/estimators/test_pt_vertex_kernel.py).  RGB only.
  */
+#include "diffuse.h"
 #include "direct.h"
 #include "light_sample.h"
 #include "scatter.h"
@@ -29,8 +30,6 @@
 /* Material kinds, in the order of _native.PT_VERTEX_KINDS (pathspace.estimators.pt_fused numbers them by it). */
 enum { KIND_DIFFUSE, KIND_MIRROR, KIND_DIELECTRIC, KIND_COUNT };
 static const char *const KIND_NAMES[KIND_COUNT] = {"diffuse", "mirror", "dielectric"};
-/* Diffuse sampling techniques, in the order of pathspace.bsdfs.DIFFUSE_SAMPLING. */
-enum { DIFFUSE_COSINE, DIFFUSE_UNIFORM };
 /* Roulette policies, in the order of pathspace.roulette.POLICIES. */
 enum { ROULETTE_OFF, ROULETTE_FIXED, ROULETTE_ALBEDO, ROULETTE_THROUGHPUT, ROULETTE_COUNT };
 
@@ -40,12 +39,6 @@ typedef struct {
     int diffuse_technique, heuristic, policy, start_depth, trapped_depth;
     double exponent, probability, cap;
 } Options;
-
-/* NumPy's maximum(x, 0) of a float32: NaN stays NaN. */
-static inline float max_zero(float x)
-{
-    return isnan(x) || x > 0.0f ? x : 0.0f;
-}
 
 /* pathspace.bsdfs.fresnel.fresnel_dielectric: the reflectance F and the cosine of the transmitted angle. */
 static inline double fresnel_dielectric(double cos_i, double eta, double *cos_t)
@@ -75,7 +68,7 @@ static void sample_diffuse(const Options *o, const double *albedo, const float n
 {
     if (o->diffuse_technique == DIFFUSE_UNIFORM) {
         float z = 1.0f - 2.0f * (float)u1;
-        float r = sqrtf(max_zero(1.0f - z * z));
+        float r = sqrtf(ps_max_zero(1.0f - z * z));
         float sphere[3] = {r * cos_phi, r * sin_phi, z};
         float side = copysignf(1.0f, ps_dot3(n, sphere));
         for (int k = 0; k < 3; ++k)
@@ -86,7 +79,7 @@ static void sample_diffuse(const Options *o, const double *albedo, const float n
         s->pdf = PS_INV_TWO_PI;
     } else {
         ps_cosine_direction(n, u1, cos_phi, sin_phi, s->wi);
-        s->pdf = (double)max_zero(ps_dot3(n, s->wi)) * PS_INV_PI;
+        s->pdf = (double)ps_max_zero(ps_dot3(n, s->wi)) * PS_INV_PI;
         for (int c = 0; c < CHANNELS; ++c)
             s->weight[c] = albedo[c];
     }
@@ -222,10 +215,8 @@ static npy_intp next_events(const VertexArrays *va, const Options *o, const int3
         int useful = 0;
         if (sampled[i - start]) {
             ++count;
-            float cos_i = ps_dot3(nf, s->wi);
-            double cos_over_pi = (double)max_zero(cos_i) * PS_INV_PI, f_cos[CHANNELS], le[CHANNELS], b[CHANNELS];
-            double uniform_pdf = cos_i > 0.0f ? PS_INV_TWO_PI : 0.0;
-            double pdf_bsdf = o->diffuse_technique == DIFFUSE_COSINE ? cos_over_pi : uniform_pdf;
+            double pdf_bsdf, f_cos[CHANNELS], le[CHANNELS], b[CHANNELS];
+            double cos_over_pi = ps_diffuse_eval(o->diffuse_technique, nf, s->wi, &pdf_bsdf);
             for (int c = 0; c < CHANNELS; ++c) {
                 f_cos[c] = va->reflectance[c * va->materials + m] * cos_over_pi;
                 le[c] = va->radiance[c * va->lights.count + s->entity];

@@ -1,13 +1,15 @@
-"""The light tracer's fused connections to the camera (ext/lens_connect.c) against the NumPy code they stand for.
+"""The fused connections of light vertices to the camera (ext/lens_connect.c) against the NumPy code they stand for.
 
-``LightTracer(kernel="fused")`` joins light vertices to a pinhole camera in one C pass where the scene allows
-(:mod:`pathspace.estimators.lens_fused`); ``kernel="numpy"`` is the reference.  Compared bit for bit (as
-integers): whole renders on scenes with diffuse, mirror and glass surfaces under several depths and roulette
-policies, with the kernel's calls counted; then the connections of made-up subpaths with extreme vertices
-(throughputs over 300 decades and zero, infinite or NaN; vertices behind, beside and right at the camera;
-surfaces seen from both sides and edge-on; no normal, NaN normals and directions; points on one- and two-sided
-lights, facing the camera or not), through the shadow rays and without them; then the scenes and settings left
-to NumPy, and the kernel's refusals.
+``LightTracer(kernel="fused")`` and ``BDPT(kernel="fused")`` join light vertices to a pinhole camera in one C
+pass where the scene allows (:mod:`pathspace.estimators.lens_fused`); ``kernel="numpy"`` is the reference.
+Compared bit for bit (as integers): whole light-tracing renders on scenes with diffuse, mirror and glass surfaces
+under several depths and roulette policies, with the kernel's calls counted (BDPT's renders are compared in
+test_join_kernel.py); then the connections of made-up subpaths with extreme vertices (throughputs over 300
+decades and zero, infinite or NaN; vertices behind, beside and right at the camera; surfaces seen from both
+sides and edge-on; no normal, NaN normals and directions; points on one- and two-sided lights, facing the camera
+or not; densities and survival probabilities over 300 decades and zero, infinite or NaN), with and without MIS
+densities, through the shadow rays and without them; then the scenes and settings left to NumPy, and the
+kernel's refusals.
 """
 from __future__ import annotations
 
@@ -67,11 +69,19 @@ def test_fused_light_tracing_equals_numpy_through_glass(name, kernel_calls):
 
 # -- connections of made-up subpaths ------------------------------------------------------------------------
 
+def extreme(rng: np.random.Generator, n: int) -> np.ndarray:
+    """n positive numbers over 300 decades, some zero, negative zero, infinite or NaN."""
+    x = 10.0 ** rng.uniform(-150, 150, n)
+    for value in (0.0, -0.0, np.inf, np.nan):
+        x[rng.random(n) < 0.01] = value
+    return x
+
+
 def made_up_subpaths(sc, rng: np.random.Generator, n: int = 8000) -> Subpaths:
     """n one-vertex-per-lane subpaths of vertices in front of the camera: on surfaces (diffuse, mirror, glass;
     seen from both sides and edge-on) and on the lights (facing the camera or not), some right at the pinhole,
     behind it or beside the film, some with no normal or a NaN one or a NaN direction back; throughputs over 300
-    decades and some zero, negative zero, infinite or NaN."""
+    decades and some zero, negative zero, infinite or NaN, and so their densities and survival probabilities."""
     camera = sc.camera
     depth = rng.uniform(0.5, 6.0, n)
     depth[rng.random(n) < 0.05] *= -1.0                                                # behind the pinhole
@@ -92,6 +102,7 @@ def made_up_subpaths(sc, rng: np.random.Generator, n: int = 8000) -> Subpaths:
     beta = 10.0 ** rng.uniform(-150, 150, (3, n))
     for value in (0.0, -0.0, np.inf, np.nan):
         beta[:, rng.random(n) < 0.01] = value
+    densities = {name: extreme(rng, n) for name in ("fwd", "rev", "g_prev", "q", "q_rev")}
     on_light = rng.random(n) < 0.3
     kind = np.where(on_light & (rng.random(n) < 0.5), LIGHT, SURFACE).astype(np.int8)
     materials = sc.materials
@@ -101,14 +112,16 @@ def made_up_subpaths(sc, rng: np.random.Generator, n: int = 8000) -> Subpaths:
     fields.update(lane=np.arange(n), index=rng.integers(0, 6, n), p=p.astype(np.float32),
                   n=normal.astype(np.float32), eps=np.full(n, 1e-5, np.float32), wo=wo.astype(np.float32),
                   beta=beta, delta=materials.delta.take(material) & (kind == SURFACE), kind=kind, material=material,
-                  entity=entity, u=rng.random((2, n)), infinite=np.zeros(n, bool))
+                  entity=entity, u=rng.random((2, n)), infinite=np.zeros(n, bool), **densities)
     return Subpaths(offset=np.arange(n + 1), terminated=np.zeros(n, bool), **fields)
 
 
 @pytest.mark.parametrize("name, seed", [("cornell-box", 1), ("cornell-box-specular", 2)])
 @pytest.mark.parametrize("occlusion", [True, False])
-def test_fused_connections_equal_numpy_on_extreme_vertices(name, seed, occlusion, monkeypatch):
-    """Through the shadow rays, and without them (every vertex's value compared, the blocked ones too)."""
+@pytest.mark.parametrize("densities, technique", [(False, "cosine"), (True, "cosine"), (True, "uniform")])
+def test_fused_connections_equal_numpy_on_extreme_vertices(name, seed, occlusion, densities, technique, monkeypatch):
+    """Through the shadow rays, and without them (every vertex's value compared, the blocked ones too); without
+    densities (light tracing) and with them (BDPT), under both diffuse sampling techniques."""
     sc = scene(name)
     rng = np.random.default_rng(seed)
     light = made_up_subpaths(sc, rng)
@@ -117,16 +130,23 @@ def test_fused_connections_equal_numpy_on_extreme_vertices(name, seed, occlusion
     assert two_sided.any() and not two_sided.all()
     if not occlusion:
         monkeypatch.setattr(connections, "segment_blocked", lambda scene, a, *rest: np.zeros(a.shape[1], bool))
+    options = {"diffuse_sampling": technique}
     parts = {}
     for kernel in ("fused", "numpy"):
-        fused, _ = lens_kernel(sc, RGBColours, False, kernel)
-        batch = Batch(sc, light, None, None, RGBColours, {}, 100, np.array([0, light.lane.size]), densities=False,
-                      made=[], lens_kernel=fused)
+        fused, _ = lens_kernel(sc, RGBColours, densities, options, kernel)
+        batch = Batch(sc, light, None, None, RGBColours, options, 100, np.array([0, light.lane.size]),
+                      densities=densities, made=[], lens_kernel=fused)
         with np.errstate(all="ignore"):
             parts[kernel] = (lens_samples(batch), batch.rays, batch.nonfinite)
     (fused, rays_f, bad_f), (numpy, rays_n, bad_n) = parts["fused"], parts["numpy"]
     assert (rays_f, bad_f) == (rays_n, bad_n) and bad_f > 0 and fused.count > (1500 if not occlusion else 100)
-    for field in ("value", "raster", "lane", "s", "t", "flags"):
+    fields = ["value", "raster", "lane", "s", "t", "flags"]
+    if densities:
+        fields += ["qs_fwd", "qs_rev", "qs_minus_rev", "pt_fwd", "pt_rev", "pt_minus_rev"]
+        for density in ("qs_minus_rev", "pt_rev"):   # the made-up extremes reach the densities that read them
+            values = getattr(fused, density)
+            assert (values > 0).any() and (values == 0).any() and not np.isfinite(values).all(), density
+    for field in fields:
         same_bits(getattr(fused, field), getattr(numpy, field), field)
 
 
@@ -139,27 +159,27 @@ def test_scenes_and_settings_the_kernel_does_not_serve_say_why():
         (scene("cornell-box-point-light"), RGBColours, False, "fused", "lights other than area lights"),
         (scene("veach-mis"), RGBColours, False, "fused", "material 'plate1' is conductor"),
         (box, SpectralColours(np.full((4, 1), 550.0), None, None), False, "fused", "spectral"),
-        (box, RGBColours, True, "fused", "densities"),
         (box, RGBColours, False, "numpy", "kernel='numpy'"),
     ]
     for sc, colours, densities, kernel, reason in cases:
-        fused, why = lens_kernel(sc, colours, densities, kernel)
+        fused, why = lens_kernel(sc, colours, densities, {}, kernel)
         assert fused is None and reason in why
-    assert lens_kernel(box, RGBColours, False, "fused")[0] is not None
+    for densities in (False, True):
+        assert lens_kernel(box, RGBColours, densities, {}, "fused")[0] is not None
     assert any("camera in NumPy (a camera other than a pinhole)" in line
                for line in LightTracer().plan(scene("cornell-box-thin-lens")))
 
 
-def kernel_args(k: int = 3):
+def kernel_args(k: int = 3, densities: bool = False):
     sc = scene("cornell-box")
-    fused, _ = lens_kernel(sc, RGBColours, False, "fused")
+    fused, _ = lens_kernel(sc, RGBColours, False, {}, "fused")
     v = 4
     vectors = [np.ones((3, v), np.float32)] * 3
     camera = sc.camera
     return [*vectors, np.ones((3, v)), np.zeros(v, np.int64), np.zeros(v, np.int64), np.arange(k, dtype=np.int64),
             np.zeros(k, bool), fused.diffuse, fused.reflectance, fused.radiance, fused.two_sided, camera.position,
             camera.forward, camera.right, camera.image_up, camera.tan_half[0], camera.tan_half[1], camera.width,
-            camera.height, camera.lens_area]
+            camera.height, camera.lens_area, 0, *([np.ones(v)] * 3 if densities else [None] * 3)]
 
 
 @pytest.mark.parametrize("position, value, error, match", [
@@ -173,6 +193,9 @@ def kernel_args(k: int = 3):
     (10, np.ones((3, 1)), ValueError, "must agree"),
     (3, np.ones((3, 4), np.float32), TypeError, "beta"),
     (12, np.ones(2), ValueError, "position must have 3 entries"),
+    (21, 2, ValueError, "technique must be 0 .cosine. or 1 .uniform., got 2"),
+    (22, np.ones(4), ValueError, "q, q_rev and g_prev must all be None or all"),
+    (24, np.ones(4), ValueError, "q, q_rev and g_prev must all be None or all"),
 ])
 def test_lens_connect_refuses_bad_arguments(position, value, error, match):
     args = kernel_args()
@@ -189,6 +212,20 @@ def test_lens_connect_refuses_a_light_vertex_off_the_emitting_triangles():
         _native.lens_connect(*args)
 
 
-def test_lens_connect_takes_no_vertices():
-    out = _native.lens_connect(*kernel_args(0))
-    assert out[0].shape == (3, 0) and out[2].shape == (2, 0)
+@pytest.mark.parametrize("position, value, error, match", [
+    (22, np.ones(3), ValueError, "q, q_rev and g_prev must all be None or all"),
+    (23, None, ValueError, "q, q_rev and g_prev must all be None or all"),
+    (24, np.ones(4, np.float32), TypeError, "g_prev"),
+])
+def test_lens_connect_refuses_bad_densities(position, value, error, match):
+    args = kernel_args(densities=True)
+    args[position] = value
+    with pytest.raises(error, match=match):
+        _native.lens_connect(*args)
+
+
+@pytest.mark.parametrize("densities", [False, True])
+def test_lens_connect_takes_no_vertices(densities):
+    out = _native.lens_connect(*kernel_args(0, densities))
+    assert len(out) == (9 if densities else 5)
+    assert out[0].shape == (3, 0) and out[2].shape == (2, 0) and all(a.shape == (0,) for a in out[5:])

@@ -35,6 +35,12 @@ pyramid : int, default 0
     Record, for every path length up to this many segments and every
     strategy (s, t), the unweighted and the weighted contribution images
     (Veach's pyramid; ``RenderResult.strategies``).
+kernel : "fused" (default) or "numpy"
+    "fused" joins light and camera vertices (s, t >= 2) and light vertices
+    and the camera (t = 1) in one C pass each where the scene allows (see
+    :mod:`pathspace.estimators.join_fused` and
+    :mod:`pathspace.estimators.lens_fused`); "numpy" always in the NumPy
+    code, the reference.  Both give the same image bit for bit.
 """
 from __future__ import annotations
 
@@ -43,9 +49,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..mis import SubpathPdfs, check_heuristic, mis_weights
+from ..spectra import RGBColours
 from . import parameters as p
 from .bidirectional import Bidirectional
 from .connections import Batch, Contributions, emitter_hits, joins, lens_hits, lens_samples, light_samples
+from .join_fused import join_kernel
+from .lens_fused import lens_kernel
+from .subpaths import SubpathSettings
 
 __all__ = ["BDPT"]
 
@@ -58,6 +68,7 @@ class BDPT(Bidirectional):
     mis_beta: float = p.mis_beta()
     strategy: tuple | None = p.mis_strategy()
     mis_strategies: object = p.mis_strategies()
+    kernel: str = p.kernel("the joining of vertices (s, t >= 2, and t = 1)")
 
     name = "bdpt"
     uses_lens_hits = True
@@ -89,7 +100,17 @@ class BDPT(Bidirectional):
         delta = scene.materials.delta_names
         if delta:
             lines.append(f"specular materials ({', '.join(delta)}): no connection through their vertices")
+        options = {"diffuse_sampling": self.diffuse_sampling}
+        for what, gate in (("light and camera vertices joined", join_kernel),
+                           ("light vertices joined to the camera", lens_kernel)):
+            fused, reason = gate(scene, RGBColours, True, options, self.kernel)
+            lines.append(f"{what} in one C pass (a fused kernel) in RGB, in NumPy when spectral" if fused is not None
+                         else f"{what} in NumPy ({reason})")
         return lines
+
+    def _kernels(self, scene, settings: SubpathSettings) -> dict:
+        return {name: gate(scene, settings.colours, settings.densities, settings.options, self.kernel)[0]
+                for name, gate in (("join_kernel", join_kernel), ("lens_kernel", lens_kernel))}
 
     def check(self, scene) -> None:
         """Nothing in a scene stops BDPT (strategies a scene makes infeasible get weight 0)."""

@@ -214,7 +214,12 @@ class Bidirectional(Estimator):
         if terminated.any():
             mode.terminate_secondary(state, terminated)
         return Batch(scene, light, eye, hits if lens else None, colours, settings.options, self.depth_limit,
-                     units, self.uses_densities, chosen=chosen), state
+                     units, self.uses_densities, chosen=chosen, **self._kernels(scene, settings)), state
+
+    def _kernels(self, scene, settings: SubpathSettings) -> dict:
+        """The fused C kernels of a batch's connections on ``scene`` with ``settings`` (the :class:`Batch` fields
+        ``lens_kernel`` and ``join_kernel``) that this estimator uses and that serve the scene; none here."""
+        return {}
 
     def _walk_settings(self, scene, mode, samplers: Mapping[str, Sampler], counters: Counters,
                        control: RenderControl) -> tuple[Lanes, SubpathSettings]:

@@ -30,8 +30,9 @@ import numpy as np
 from ..bsdfs import MaterialLanes, Surface
 from ..mis import LIGHT_DELTA, Connections
 from ..vecmath import dot
+from .join_fused import JoinKernel
 from .lens_fused import LensKernel
-from .subpaths import LIGHT, SURFACE, LensHits, Subpaths, Vertices, cos_at, reverse_pdf, to_area
+from .subpaths import LIGHT, SURFACE, LensHits, Subpaths, Vertices, area_density, cos_at, reverse_pdf, to_area
 from .visibility import light_sample_blocked, segment_blocked
 
 __all__ = ["Batch", "Contributions", "emitter_hits", "light_samples", "lens_samples", "lens_hits", "joins",
@@ -63,6 +64,7 @@ class Batch:
     chosen: tuple[np.ndarray, np.ndarray] | None = None   # (s, t) per lane: only that strategy (MMLT); None: all
     made: list[Contributions] | None = None  # connections made while the subpaths were walked (light tracing)
     lens_kernel: LensKernel | None = None    # joins light vertices to the camera in C (see estimators.lens_fused)
+    join_kernel: JoinKernel | None = None    # joins light and camera vertices in C (see estimators.join_fused)
 
     def __post_init__(self) -> None:
         self.lane_flags = self.scene.lights.flags.take(self.light.entity.take(self.light.offset[:-1]))
@@ -195,13 +197,14 @@ def lens_samples(batch: Batch, light: Subpaths | None = None) -> Contributions |
                                 & batch.wanted(light.lane, light.index + 1, 1)))
     if not y.size:
         return None
-    if batch.lens_kernel is not None and not batch.densities:   # a pinhole: beta times what y sends, in C
-        sent, pdf_lens, raster, on_film, cos = batch.lens_kernel(light, y.v, on_light.take(y.v))
-        we = camera.importance_of(cos, on_film)
+    if batch.lens_kernel is not None:   # a pinhole: beta times what y sends (and the densities) in C
+        joined = batch.lens_kernel(light, y.v, on_light.take(y.v))
+        we, pdf_lens = camera.importance_of(joined.cos, joined.on_film), joined.pdf
         with np.errstate(divide="ignore", invalid="ignore"):
-            value = np.where(on_film & (we > 0) & (pdf_lens > 0), sent * (we / pdf_lens), 0.0)
-        lens = np.broadcast_to(camera.position[:, None], (3, y.size))
+            value = np.where(joined.on_film & (we > 0) & (pdf_lens > 0), joined.sent * (we / pdf_lens), 0.0)
+        lens, raster = np.broadcast_to(camera.position[:, None], (3, y.size)), joined.raster
     else:
+        joined = None
         wi, we, pdf_lens, lens, raster, valid = camera.sample_importance(y.p, y.u)
         value, pdf_fwd, pdf_back = _toward_lens(batch, y, on_light.take(y.v), wi, batch.densities)
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -216,27 +219,29 @@ def lens_samples(batch: Batch, light: Subpaths | None = None) -> Contributions |
     useful = useful[unblocked]
     if not useful.size:
         return None
+    y, value, raster = ys.keep(unblocked), np.take(value, useful, axis=1), np.take(raster, useful, axis=1)
     if not batch.densities:
-        ys = ys.keep(unblocked)
-        return Contributions.make(ys.lane, ys.index + 1, 1, np.take(value, useful, axis=1),
-                                  raster=np.take(raster, useful, axis=1), flags=batch.lane_flags.take(ys.lane))
-    y, value = y.keep(useful), np.take(value, useful, axis=1)
-    wi, lens = np.take(wi, useful, axis=1), np.take(lens, useful, axis=1)
-    pdf_fwd, pdf_back, we = pdf_fwd[useful], pdf_back[useful], we[useful]
-    d = lens - y.p
-    dist2 = dot(d, d)
-    axis = np.repeat(camera.forward[:, None], y.size, axis=1)
-    # pt = the lens point: the camera's positional density, and the light walk's density of reaching it.
-    pt_rev = to_area(pdf_fwd * y.q, axis, wi, dist2)
+        return Contributions.make(y.lane, y.index + 1, 1, value, raster=raster, flags=batch.lane_flags.take(y.lane))
+    we = we[useful]
+    if joined is not None:
+        pt_rev, qs_minus_rev = joined.pt_rev[useful], joined.qs_minus_rev[useful]
+        cos_lens, cos_y, dist2 = joined.cos[useful], joined.cos_at[useful], joined.dist2[useful]
+    else:
+        wi, lens = np.take(wi, useful, axis=1), np.take(lens, useful, axis=1)
+        d = lens - y.p
+        dist2 = dot(d, d)
+        axis = np.repeat(camera.forward[:, None], y.size, axis=1)
+        # pt = the lens point: the camera's positional density, and the light walk's density of reaching it.
+        pt_rev = to_area(pdf_fwd[useful] * y.q, axis, wi, dist2)
+        # y_{s-2} as the camera walk would go on to it (nothing for s = 1: pdf_back and g_prev are 0 there).
+        qs_minus_rev = _at_previous(pdf_back[useful] * y.q_rev, y)
+        cos_lens, cos_y = camera.cos_to_axis(-wi), cos_at(y.n, wi)
     # qs = y_{s-1} as the camera walk would reach it from the lens point: the direction's density
     # 1 / (A cos^3) is We lens_area cos (see pathspace.camera).
-    qs_rev = to_area(we * camera.lens_area * np.abs(camera.cos_to_axis(-wi)), y.n, wi, dist2)
-    # y_{s-2} as the camera walk would go on to it (nothing for s = 1: pdf_back and g_prev are 0 there).
-    qs_minus_rev = _at_previous(pdf_back * y.q_rev, y)
-    return Contributions.make(y.lane, y.index + 1, 1, value, raster=np.take(raster, useful, axis=1),
-                              qs_fwd=y.fwd, qs_rev=qs_rev, qs_minus_rev=qs_minus_rev,
-                              pt_fwd=np.full(y.size, 1.0 / camera.lens_area), pt_rev=pt_rev,
-                              flags=batch.lane_flags.take(y.lane))
+    qs_rev = area_density(we * camera.lens_area * np.abs(cos_lens), cos_y, dist2)
+    return Contributions.make(y.lane, y.index + 1, 1, value, raster=raster, qs_fwd=y.fwd, qs_rev=qs_rev,
+                              qs_minus_rev=qs_minus_rev, pt_fwd=np.full(y.size, 1.0 / camera.lens_area),
+                              pt_rev=pt_rev, flags=batch.lane_flags.take(y.lane))
 
 
 def _toward_lens(batch: Batch, y: Vertices, on_light: np.ndarray, wi: np.ndarray, reverse: bool = True):
@@ -354,29 +359,34 @@ def _chosen_joins(batch: Batch):
 
 def _join(batch: Batch, y: Vertices, z: Vertices) -> Contributions | None:
     """The connections y -> z (views of the same lanes) whose shadow rays are clear."""
-    d = z.p.astype(np.float64) - y.p
-    dist2 = dot(d, d)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        w = (d / np.sqrt(dist2)).astype(np.float32)  # y -> z
-    f_y, pdf_y = batch.materials(y).eval(_surface(y), w)
-    f_z, pdf_z = batch.materials(z).eval(_surface(z), -w)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        value = np.where(dist2 > 0, y.beta * f_y * f_z * z.beta / dist2, 0.0)
+    if batch.join_kernel is not None:   # diffuse vertices: the contributions and densities in C
+        joined = batch.join_kernel(batch.light, batch.eye, y.v, z.v)
+        value = joined.value
+    else:
+        d = z.p.astype(np.float64) - y.p
+        dist2 = dot(d, d)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            w = (d / np.sqrt(dist2)).astype(np.float32)  # y -> z
+        f_y, pdf_y = batch.materials(y).eval(_surface(y), w)
+        f_z, pdf_z = batch.materials(z).eval(_surface(z), -w)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            value = np.where(dist2 > 0, y.beta * f_y * f_z * z.beta / dist2, 0.0)
     useful = batch.useful(value)
     batch.rays += useful.size
-    blocked = segment_blocked(batch.scene, np.take(y.p, useful, axis=1), y.eps.take(useful),
-                              np.take(y.n, useful, axis=1), np.take(z.p, useful, axis=1), z.eps.take(useful),
-                              np.take(z.n, useful, axis=1))
-    useful = useful[~blocked]
+    ys, zs = y.keep(useful), z.keep(useful)   # gather only the useful pairs' fields (those not gathered yet)
+    unblocked = np.flatnonzero(~segment_blocked(batch.scene, ys.p, ys.eps, ys.n, zs.p, zs.eps, zs.n))
+    useful = useful[unblocked]
     if not useful.size:
         return None
-    y, z, dist2 = y.keep(useful), z.keep(useful), dist2[useful]
-    value, w = np.take(value, useful, axis=1), np.take(w, useful, axis=1)
-    pdf_y, pdf_z = pdf_y[useful], pdf_z[useful]
-    return Contributions.make(
-        y.lane, y.index + 1, z.index + 1, value,
-        qs_fwd=y.fwd, qs_rev=to_area(pdf_z * z.q, y.n, w, dist2),
-        qs_minus_rev=_at_previous(reverse_pdf(batch.materials(y), y.n, w, y.wo) * y.q_rev, y),
-        pt_fwd=z.fwd, pt_rev=to_area(pdf_y * y.q, z.n, w, dist2),
-        pt_minus_rev=_at_previous(reverse_pdf(batch.materials(z), z.n, -w, z.wo) * z.q_rev, z),
-        flags=batch.lane_flags.take(y.lane))
+    y, z, value = ys.keep(unblocked), zs.keep(unblocked), np.take(value, useful, axis=1)
+    if batch.join_kernel is not None:
+        densities = {name: getattr(joined, name)[useful] for name in ("qs_rev", "qs_minus_rev", "pt_rev",
+                                                                      "pt_minus_rev")}
+    else:
+        dist2, w, pdf_y, pdf_z = dist2[useful], np.take(w, useful, axis=1), pdf_y[useful], pdf_z[useful]
+        densities = dict(qs_rev=to_area(pdf_z * z.q, y.n, w, dist2),
+                         qs_minus_rev=_at_previous(reverse_pdf(batch.materials(y), y.n, w, y.wo) * y.q_rev, y),
+                         pt_rev=to_area(pdf_y * y.q, z.n, w, dist2),
+                         pt_minus_rev=_at_previous(reverse_pdf(batch.materials(z), z.n, -w, z.wo) * z.q_rev, z))
+    return Contributions.make(y.lane, y.index + 1, z.index + 1, value, qs_fwd=y.fwd, pt_fwd=z.fwd, **densities,
+                              flags=batch.lane_flags.take(y.lane))

@@ -1,22 +1,25 @@
-"""The light tracer's connections to the camera in one C pass.
+"""Light vertices joined to the camera (light tracing, BDPT's t = 1) in one C pass.
 
 :func:`~pathspace.estimators.connections.lens_samples` joins light
 vertices to the lens: the camera's geometry, what each vertex sends toward
-it (a BSDF or an emitter, :func:`~pathspace.estimators.connections._toward_lens`)
-and the contribution, a few dozen array operations over the vertices'
-gathered fields.  For the scenes and settings most light-tracing renders
-use, ``ext/lens_connect.c`` does it per vertex in one pass, bit for bit as
+it (a BSDF or an emitter, :func:`~pathspace.estimators.connections._toward_lens`),
+the contribution and, for BDPT, the MIS densities, a few dozen array
+operations over the vertices' gathered fields.  For the scenes and settings
+most renders use, ``ext/lens_connect.c`` does it per vertex in one pass, bit for bit as
 the NumPy code does (which stays the reference and serves every other case):
 
-- RGB rendering, contributions without MIS densities (light tracing);
+- RGB rendering;
 - a pinhole camera;
 - area lights alone;
 - diffuse, mirror and smooth dielectric materials (those of
   :data:`pathspace.estimators.pt_fused.MODELS`; the vertices joined are the
   non-specular ones, so diffuse).
 
-Area lights are the first entities of a scene's lights, so a vertex on a
-light indexes the emitting triangles' tables by its entity.
+With MIS densities (BDPT), the kernel also gives those the connection
+changes, but for the camera's density at the vertex, which needs the
+camera's importance (see :class:`LensJoin`).  Area lights are the first
+entities of a scene's lights, so a vertex on a light indexes the emitting
+triangles' tables by its entity.
 
 :func:`lens_kernel` says whether a scene and settings are served, and why not.
 """
@@ -27,49 +30,71 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _native
-from ..bsdfs import Diffuse
+from ..bsdfs import DIFFUSE_SAMPLING, Diffuse
 from ..camera import PinholeCamera
 from ..lights import AreaLight
 from ..spectra import RGBColours
 from .pt_fused import emitter_radiance, material_rgb, unserved_material
 
-__all__ = ["LensKernel", "lens_kernel"]
+__all__ = ["LensJoin", "LensKernel", "lens_kernel"]
+
+
+@dataclass
+class LensJoin:
+    """What ``ext/lens_connect.c`` gives for K light vertices joined to the pinhole: beta times what each
+    ``sent`` toward it (3, K), the pinhole's solid-angle density ``pdf`` at it, its ``raster`` position (2, K),
+    whether that is ``on_film``, the cosine ``cos`` at the lens; with densities (else None), the MIS densities
+    ``pt_rev`` and ``qs_minus_rev`` (see :class:`~pathspace.mis.Connections`), and the vertex's ``cos_at`` and
+    squared distance ``dist2`` to the pinhole, which turn the camera's density into area measure there."""
+
+    sent: np.ndarray
+    pdf: np.ndarray
+    raster: np.ndarray
+    on_film: np.ndarray
+    cos: np.ndarray
+    pt_rev: np.ndarray | None = None
+    qs_minus_rev: np.ndarray | None = None
+    cos_at: np.ndarray | None = None
+    dist2: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
 class LensKernel:
     """The tables ``ext/lens_connect.c`` reads for one scene: which materials are diffuse and their
-    reflectance, the emitting triangles' radiance and sidedness, and the pinhole camera."""
+    reflectance, the emitting triangles' radiance and sidedness, the pinhole camera, the diffuse sampling
+    technique and whether the connections carry MIS densities."""
 
     diffuse: np.ndarray       # (M,) bool
     reflectance: np.ndarray   # (3, M) float64
     radiance: np.ndarray      # (3, E) float64, per emitting triangle
     two_sided: np.ndarray     # (E,) bool
     camera: PinholeCamera
+    technique: int            # index in DIFFUSE_SAMPLING
+    densities: bool
 
-    def __call__(self, light, chosen: np.ndarray, on_light: np.ndarray):
-        """For the vertices ``chosen`` (int64 indices) of the subpaths ``light``, those on lights where
-        ``on_light``: (beta times what each sends toward the pinhole (3, K), the pinhole's solid-angle density
-        at it (K,), its raster position (2, K), whether that is on the film (K,), the cosine at the lens (K,))."""
+    def __call__(self, light, chosen: np.ndarray, on_light: np.ndarray) -> LensJoin:
+        """The vertices ``chosen`` (int64 indices) of the subpaths ``light``, those on lights where ``on_light``,
+        joined to the pinhole."""
         camera = self.camera
         vertices = (np.ascontiguousarray(a) for a in (light.p, light.n, light.wo, light.beta, light.material,
                                                       light.entity))
-        return _native.lens_connect(*vertices, np.ascontiguousarray(chosen, np.int64), np.ascontiguousarray(on_light),
-                                    self.diffuse, self.reflectance, self.radiance, self.two_sided, camera.position,
-                                    camera.forward, camera.right, camera.image_up, camera.tan_half[0],
-                                    camera.tan_half[1], camera.width, camera.height, camera.lens_area)
+        densities = ((np.ascontiguousarray(a) for a in (light.q, light.q_rev, light.g_prev)) if self.densities
+                     else (None, None, None))
+        return LensJoin(*_native.lens_connect(
+            *vertices, np.ascontiguousarray(chosen, np.int64), np.ascontiguousarray(on_light), self.diffuse,
+            self.reflectance, self.radiance, self.two_sided, camera.position, camera.forward, camera.right,
+            camera.image_up, camera.tan_half[0], camera.tan_half[1], camera.width, camera.height, camera.lens_area,
+            self.technique, *densities))
 
 
-def lens_kernel(scene, colours, densities: bool, kernel: str) -> tuple[LensKernel | None, str]:
-    """(the kernel, "") if a light tracer with ``kernel`` ("fused" or "numpy") can join its vertices to the
-    camera of ``scene`` through ``ext/lens_connect.c``, rendering with ``colours`` and with or without MIS
-    ``densities``; else (None, why not)."""
+def lens_kernel(scene, colours, densities: bool, options: dict, kernel: str) -> tuple[LensKernel | None, str]:
+    """(the kernel, "") if a bidirectional estimator with ``kernel`` ("fused" or "numpy") can join its light
+    vertices to the camera of ``scene`` through ``ext/lens_connect.c``, rendering with ``colours``, with or without
+    MIS ``densities`` and with the material ``options`` (``diffuse_sampling``); else (None, why not)."""
     if kernel != "fused":
         return None, "kernel='numpy'"
     if colours is not RGBColours:
         return None, "spectral rendering"
-    if densities:
-        return None, "connections with MIS densities"
     if type(scene.camera) is not PinholeCamera:
         return None, "a camera other than a pinhole"
     if scene.lights.models != [AreaLight]:
@@ -79,5 +104,6 @@ def lens_kernel(scene, colours, densities: bool, kernel: str) -> tuple[LensKerne
     if reason:
         return None, reason
     diffuse = np.array([type(m) is Diffuse for m in table.materials], dtype=bool)
+    technique = DIFFUSE_SAMPLING.index(options.get("diffuse_sampling", "cosine"))
     return LensKernel(diffuse, material_rgb(table)[0], emitter_radiance(scene.lights),
-                      np.ascontiguousarray(scene.lights.area.two_sided), scene.camera), ""
+                      np.ascontiguousarray(scene.lights.area.two_sided), scene.camera, technique, densities), ""

@@ -59,7 +59,7 @@ class LightTracer(Bidirectional):
                          "are not formed (those pixels miss that light)")
         if scene.lights.environment is not None:
             lines.append("environment seen directly: not formed (an infinite light cannot be joined to the camera)")
-        fused, reason = lens_kernel(scene, RGBColours, False, self.kernel)
+        fused, reason = lens_kernel(scene, RGBColours, False, {"diffuse_sampling": self.diffuse_sampling}, self.kernel)
         lines.append("vertices joined to the camera in one C pass (the fused kernel) in RGB, in NumPy when spectral"
                      if fused is not None else f"vertices joined to the camera in NumPy ({reason})")
         return lines
@@ -72,14 +72,13 @@ class LightTracer(Bidirectional):
         if chosen is not None:
             return super()._subpaths(scene, mode, pixels, samplers, units, counters, control, chosen)
         state, settings = self._walk_settings(scene, mode, samplers, counters, control)
-        kernel = lens_kernel(scene, settings.colours, settings.densities, self.kernel)[0]
         batch: Batch | None = None
 
         def connect(vertices: Subpaths) -> None:
             nonlocal batch
             if batch is None:  # the vertices 0, one per lane: the batch reads the lanes' lights there
                 batch = Batch(scene, vertices, None, None, settings.colours, settings.options, self.depth_limit,
-                              units, densities=False, made=[], lens_kernel=kernel)
+                              units, densities=False, made=[], **self._kernels(scene, settings))
             part = lens_samples(batch, vertices)
             if part is not None:
                 batch.made.append(part)
@@ -90,6 +89,10 @@ class LightTracer(Bidirectional):
         if terminated.any():
             mode.terminate_secondary(state, terminated)
         return batch, state
+
+    def _kernels(self, scene, settings) -> dict:
+        return {"lens_kernel": lens_kernel(scene, settings.colours, settings.densities, settings.options,
+                                           self.kernel)[0]}
 
     def _contributions(self, batch: Batch):
         if batch.made is not None:

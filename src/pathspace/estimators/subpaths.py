@@ -52,7 +52,7 @@ from .wavefront import Lanes, take_lanes
 
 __all__ = ["Subpaths", "Vertices", "LensHits", "SubpathSettings", "SURFACE", "CAMERA", "LIGHT", "SAFETY_VERTICES",
            "CAMERA_START", "LIGHT_START", "CAMERA_VERTEX", "LIGHT_VERTEX", "camera_subpaths", "light_subpaths",
-           "stream_light_vertices", "to_area", "cos_at", "reverse_pdf"]
+           "stream_light_vertices", "to_area", "area_density", "cos_at", "reverse_pdf"]
 
 SURFACE, CAMERA, LIGHT = 0, 1, 2
 # Subpaths still growing at this many vertices are cut (and counted): only lossless traps get there.
@@ -80,8 +80,14 @@ def to_area(pdf_sa: np.ndarray, normal: np.ndarray, w: np.ndarray, dist2: np.nda
     """Solid-angle densities turned into area densities at targets a distance sqrt(dist2) away along unit
     ``w``: pdf |cos| / d^2 with cos between ``w`` and the target's ``normal`` (a zero normal -- a point
     light -- has no cosine factor; Veach 1997, eq. 8.10)."""
+    return area_density(pdf_sa, cos_at(normal, w), dist2)
+
+
+def area_density(pdf_sa: np.ndarray, cos: np.ndarray, dist2: np.ndarray) -> np.ndarray:
+    """:func:`to_area` given the target's |cos| (see :func:`cos_at`): pdf |cos| / d^2, 0 where d^2 is not
+    positive."""
     with np.errstate(divide="ignore", invalid="ignore"):
-        return np.where(dist2 > 0, pdf_sa * cos_at(normal, w) / dist2, 0.0)
+        return np.where(dist2 > 0, pdf_sa * cos / dist2, 0.0)
 
 
 def reverse_pdf(materials: MaterialLanes, n: np.ndarray, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
