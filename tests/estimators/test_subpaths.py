@@ -115,3 +115,33 @@ def test_the_light_tracer_makes_while_walking_the_connections_of_kept_subpaths()
     assert made[0]["lane"].size > count and made[0]["longest"] > 10
     for name, value in made[0].items():
         np.testing.assert_array_equal(value, made[1][name], err_msg=name)
+
+
+def test_walks_without_densities_carry_and_record_none(monkeypatch):
+    """A light tracer's walks keep no density state per lane (q, the previous vertex's normal) and record no
+    densities; BDPT's keep and record them."""
+    from pathspace.estimators import subpaths
+    from pathspace.estimators.walk import Walk
+
+    fields, recorded = [], []
+    scatter, add = Walk.scatter, subpaths._Recorder.add
+
+    def seen_scatter(self, *args, **kwargs):
+        fields.append(self.lanes.fields)
+        return scatter(self, *args, **kwargs)
+
+    def seen_add(self, *args, **kwargs):
+        record = add(self, *args, **kwargs)
+        recorded.append(set(record))
+        return record
+
+    monkeypatch.setattr(Walk, "scatter", seen_scatter)
+    monkeypatch.setattr(subpaths._Recorder, "add", seen_add)
+    scene = ps.load_scene(CORNELL, resolution=(8, 8))
+    for estimator, densities in (("lt", False), ("bdpt", True)):
+        fields.clear()
+        recorded.clear()
+        ps.render(scene, estimator, spp=1, threads=1)
+        assert fields and recorded
+        assert all(("q" in f and "prev_n" in f and "prev_infinite" in f) == densities for f in fields), estimator
+        assert all(({"rev", "g_prev", "q", "q_rev"} <= names) == densities for names in recorded), estimator

@@ -67,7 +67,10 @@ CAMERA_START = Dimensions(pixel=2, lens=2)
 LIGHT_START = Dimensions(emission=5, connect=2)
 CAMERA_VERTEX = Dimensions(bsdf=3, roulette=1, connect=3)
 LIGHT_VERTEX = Dimensions(bsdf=3, roulette=1, connect=2)
-_WALK_FIELDS = WALK_FIELDS + ("lane", "q", "prev_n", "prev_infinite")
+# What the walks keep per lane besides WALK_FIELDS; the last three only for the vertex densities (walks with
+# ``densities``): q, and the previous vertex's normal and whether it is at infinity.
+_WALK_FIELDS = WALK_FIELDS + ("lane",)
+_DENSITY_WALK_FIELDS = ("q", "prev_n", "prev_infinite")
 STREAM_CHUNK = 16384  # the fewest vertices stream_light_vertices hands over at once (but vertices 0 and the last)
 
 
@@ -245,11 +248,13 @@ class SubpathSettings:
 class _Recorder:
     """Vertices collected depth by depth (records of the lanes that have them), flattened at the end; or, with
     ``consume``, handed to it record by record and not kept (a record is then final when it is made: only
-    walks without densities, whose ``rev`` is never filled in later, stream)."""
+    walks without densities, whose ``rev`` is never filled in later, stream).  Without ``densities``, records
+    hold no :data:`DENSITY_FIELDS` but those given."""
 
-    def __init__(self, consume: Callable[[dict[str, np.ndarray]], None] | None = None) -> None:
+    def __init__(self, consume: Callable[[dict[str, np.ndarray]], None] | None = None, densities: bool = True) -> None:
         self.records: list[dict[str, np.ndarray]] = []
         self.consume = consume
+        self.densities = densities
 
     def add(self, lanes: np.ndarray, index: int, kind: int, **fields: np.ndarray) -> dict:
         """Record vertex ``index`` of ``kind`` for ``lanes``: the given :data:`FIELDS` (``p``, ``n``, ``beta``,
@@ -257,10 +262,11 @@ class _Recorder:
         light, q = 1) with nothing before it (``wo``, ``g_prev`` zero)."""
         count = lanes.size
         record = dict(lane=lanes, index=np.full(count, index, dtype=np.int64), kind=np.full(count, kind, dtype=np.int8),
-                      rev=np.zeros(count), eps=np.zeros(count, np.float32), wo=np.zeros((3, count), np.float32),
-                      g_prev=np.zeros(count), material=np.full(count, -1, np.int64),
-                      entity=np.full(count, -1, np.int64), q=np.ones(count), q_rev=np.ones(count),
+                      eps=np.zeros(count, np.float32), wo=np.zeros((3, count), np.float32),
+                      material=np.full(count, -1, np.int64), entity=np.full(count, -1, np.int64),
                       infinite=np.zeros(count, bool), delta=np.zeros(count, bool))
+        if self.densities:
+            record.update(rev=np.zeros(count), g_prev=np.zeros(count), q=np.ones(count), q_rev=np.ones(count))
         record.update(fields)
         if self.consume is None:
             self.records.append(record)
@@ -331,17 +337,21 @@ class _Growth:
         walk, settings = self.walk, self.settings
         lanes, table = walk.lanes, settings.scene.materials
         index = int(lanes.depth[0])
-        dist2 = arrival.t.astype(np.float64) ** 2
-        with np.errstate(divide="ignore", invalid="ignore"):
-            fwd = self._mis_pdf() * np.abs(arrival.cos).astype(np.float64) / np.where(lanes.prev_infinite, 1.0, dist2)
-            g_prev = np.where(lanes.prev_infinite, 1.0, cos_at(lanes.prev_n, lanes.direction) / dist2)
+        densities = {}
+        if settings.densities:
+            dist2 = arrival.t.astype(np.float64) ** 2
+            with np.errstate(divide="ignore", invalid="ignore"):
+                to_area_here = np.where(lanes.prev_infinite, 1.0, dist2)
+                fwd = self._mis_pdf() * np.abs(arrival.cos).astype(np.float64) / to_area_here
+                g_prev = np.where(lanes.prev_infinite, 1.0, cos_at(lanes.prev_n, lanes.direction) / dist2)
+            densities = dict(fwd=fwd, g_prev=g_prev, q=walk.mis_survival(arrival),
+                             q_rev=walk.mis_survival(arrival, self.opposite))
         u = walk.draw()
-        q, q_rev = walk.mis_survival(arrival), walk.mis_survival(arrival, self.opposite)
         emitter = settings.scene.lights.area.emitter_of_triangle
         record = self.recorder.add(lanes.lane, index, SURFACE, p=arrival.p, n=arrival.normal, eps=arrival.eps,
-                                   wo=-lanes.direction, beta=lanes.beta, fwd=fwd, g_prev=g_prev,
-                                   material=arrival.material.astype(np.int64), entity=emitter.take(arrival.prim), q=q,
-                                   q_rev=q_rev, u=u.connect, delta=table.delta.take(arrival.material))
+                                   wo=-lanes.direction, beta=lanes.beta, material=arrival.material.astype(np.int64),
+                                   entity=emitter.take(arrival.prim), u=u.connect,
+                                   delta=table.delta.take(arrival.material), **densities)
         if index + 1 >= settings.max_vertices:
             if settings.max_vertices >= SAFETY_VERTICES:
                 settings.counters.truncated += walk.size
@@ -350,13 +360,14 @@ class _Growth:
         sample = materials.sample(arrival.surface, u.bsdf, walk.transport)
         if settings.densities:
             # The previous vertex as the opposite walk would generate it from here (Veach 1997, eq. 10.7).
-            pdf_back = np.where(sample.delta, 0.0,
-                                reverse_pdf(materials, arrival.normal, sample.wi, -lanes.direction)) * q_rev
+            pdf_back = np.where(sample.delta, 0.0, reverse_pdf(materials, arrival.normal, sample.wi, -lanes.direction))
+            pdf_back = pdf_back * densities["q_rev"]
             self.previous["rev"][np.searchsorted(self.previous["lane"], lanes.lane)] = pdf_back * g_prev
         if sample.terminated is not None:
             self.terminated[lanes.lane[sample.terminated]] = True
-        alive = walk.scatter(arrival, sample, u.roulette, walk.survival(arrival, sample), q)
-        lanes.prev_n, lanes.prev_infinite = arrival.normal, np.zeros(walk.size, bool)
+        alive = walk.scatter(arrival, sample, u.roulette, walk.survival(arrival, sample), densities.get("q"))
+        if settings.densities:
+            lanes.prev_n, lanes.prev_infinite = arrival.normal, np.zeros(walk.size, bool)
         self.previous = record
         if not alive.all():
             walk.keep(np.flatnonzero(alive))
@@ -387,11 +398,14 @@ class _Growth:
                           infinite=np.ones(count, bool), u=np.zeros((CAMERA_VERTEX.sizes["connect"], count)))
 
 
-def _walk_lanes(count: int, **state: np.ndarray) -> Lanes:
+def _walk_lanes(count: int, densities: bool, **state: np.ndarray) -> Lanes:
     """Walk state of ``count`` lanes leaving vertex 0: ``origin``, ``direction``, ``beta``, ``pdf``,
-    ``prev_n`` and ``prev_infinite`` (vertex 0's normal and whether it is at infinity), and any extra fields."""
-    return Lanes(_WALK_FIELDS + tuple(f for f in state if f not in _WALK_FIELDS), depth=np.zeros(count, np.int32),
-                 delta=np.zeros(count, bool), lane=np.arange(count), q=np.ones(count), **state)
+    ``prev_n`` and ``prev_infinite`` (vertex 0's normal and whether it is at infinity; kept, with ``q``, only
+    for walks with ``densities``), and any extra fields."""
+    fields = _WALK_FIELDS + (_DENSITY_WALK_FIELDS if densities else ())
+    fields += tuple(f for f in state if f not in fields + _DENSITY_WALK_FIELDS)
+    return Lanes(fields, depth=np.zeros(count, np.int32), delta=np.zeros(count, bool), lane=np.arange(count),
+                 q=np.ones(count), **state)
 
 
 def camera_subpaths(settings: SubpathSettings, pixels: np.ndarray, sampler, limit: np.ndarray | None = None) -> Subpaths:
@@ -409,10 +423,10 @@ def camera_subpaths(settings: SubpathSettings, pixels: np.ndarray, sampler, limi
     origin, direction = camera.generate_rays(pixels, u.pixel, u.lens)
     origin = np.ascontiguousarray(origin, dtype=np.float32)
     axis = np.repeat(camera.forward.astype(np.float32)[:, None], count, axis=1)
-    recorder = _Recorder()
+    recorder = _Recorder(densities=settings.densities)
     record = recorder.add(np.arange(count), 0, CAMERA, p=origin, n=axis, beta=np.ones((channels, count)),
                           fwd=np.full(count, 1.0 / camera.lens_area), u=np.zeros((CAMERA_VERTEX.sizes["connect"], count)))
-    lanes = _walk_lanes(count, origin=origin, direction=direction, beta=np.ones((channels, count)),
+    lanes = _walk_lanes(count, settings.densities, origin=origin, direction=direction, beta=np.ones((channels, count)),
                         pdf=camera.pdf_direction(direction, origin), prev_n=axis, prev_infinite=np.zeros(count, bool))
     walk = Walk(scene, lanes, sampler, settings.camera_roulette, CAMERA_VERTEX)
     growth = _Growth(settings, walk, settings.light_roulette, recorder, record, count)
@@ -434,7 +448,7 @@ def light_subpaths(settings: SubpathSettings, count: int, sampler, lens: bool,
     the ray leaving it carries Le |cos| / (pmf p_pos p_dir).  ``lens``: look
     for rays through a thin lens.
     """
-    recorder = _Recorder()
+    recorder = _Recorder(densities=settings.densities)
     growth = _light_walk(settings, count, sampler, recorder, lens, limit)
     subpaths = recorder.flatten(count, growth.terminated, settings.densities)
     return subpaths, LensHits.concatenate(growth.lens_hits or [], settings.colours.channels)
@@ -473,7 +487,7 @@ def stream_light_vertices(settings: SubpathSettings, count: int, sampler, consum
         elif sum(part["lane"].size for part in pending) >= chunk:
             hand_over()
 
-    terminated = _light_walk(settings, count, sampler, _Recorder(collect), False, None).terminated
+    terminated = _light_walk(settings, count, sampler, _Recorder(collect, densities=False), False, None).terminated
     if pending:
         hand_over()
     return terminated
@@ -502,8 +516,8 @@ def _light_walk(settings: SubpathSettings, count: int, sampler, recorder: _Recor
         start = beta.max(axis=0)
         extra["rr_scale"] = np.divide(1.0, start, out=np.zeros_like(start), where=start > 0)
     origin = offset_origin(e.point.astype(np.float32), e.normal, e.epsilon, e.direction)
-    lanes = _walk_lanes(count, origin=origin, direction=e.direction, beta=beta, pdf=pdf, prev_n=e.normal,
-                        prev_infinite=e.infinite, **extra)
+    lanes = _walk_lanes(count, settings.densities, origin=origin, direction=e.direction, beta=beta, pdf=pdf,
+                        prev_n=e.normal, prev_infinite=e.infinite, **extra)
     walk = Walk(scene, lanes, sampler, settings.light_roulette, LIGHT_VERTEX, "importance")
     growth = _Growth(settings, walk, settings.camera_roulette, recorder, record, count)
     growth.lens_hits = [] if lens else None
