@@ -1,7 +1,7 @@
 /*
  * The Lambertian BSDF's value and density per lane (pathspace.bsdfs.diffuse.Diffuse.eval, seen through
- * pathspace.bsdfs.Surface.facing), for the fused kernels (ext/pt_vertex.c, ext/join.c): in the operations and
- * order of the NumPy code, so that they agree bit for bit.
+ * pathspace.bsdfs.Surface.facing), for the fused kernels (ext/pt_vertex.c, ext/join.c, ext/lens_connect.c): in
+ * the operations and order of the NumPy code, so that they agree bit for bit.
  */
 #ifndef PATHSPACE_DIFFUSE_H
 #define PATHSPACE_DIFFUSE_H
@@ -18,6 +18,12 @@ enum { DIFFUSE_COSINE, DIFFUSE_UNIFORM };
 static inline float ps_max_zero(float x)
 {
     return isnan(x) || x > 0.0f ? x : 0.0f;
+}
+
+/* The same of a float64. */
+static inline double ps_max_zero_double(double x)
+{
+    return isnan(x) || x > 0.0 ? x : 0.0;
 }
 
 /* Surface.facing: the geometric normal n turned toward where rays along `direction` come from, into nf;

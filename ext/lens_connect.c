@@ -182,19 +182,18 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
             for (int c = 0; c < CHANNELS; ++c)
                 value[c] = radiance[c * e + light] * (faces ? 1.0 : 0.0) * cos_at;
             /* AreaLight.pdf_le: cosine-weighted emission, over both sides of a two-sided light */
-            pdf_fwd = (two_sided[light] ? fabs(cos_w) * 0.5 : (isnan(cos_w) || cos_w > 0.0 ? cos_w : 0.0)) * PS_INV_PI;
+            pdf_fwd = (two_sided[light] ? fabs(cos_w) * 0.5 : ps_max_zero_double(cos_w)) * PS_INV_PI;
         } else {
             int64_t id = material[i];
             if (id < 0 || id >= m || !diffuse[id]) {
                 bad = j, why = BAD_MATERIAL;
                 break;
             }
-            /* Surface.facing(n, -wo), then Diffuse.eval toward w */
-            float d[3] = {-wo[i], -wo[v + i], -wo[2 * v + i]}, back[3] = {wo[i], wo[v + i], wo[2 * v + i]};
-            float cos_arrival = -(ps_dot3(n, d));
-            float side = cos_arrival >= 0.0f ? 1.0f : -1.0f;
-            double cos_i = ((double)(n[0] * side) * w[0] + (double)(n[1] * side) * w[1]) + (double)(n[2] * side) * w[2];
-            double cos_over_pi = (isnan(cos_i) || cos_i > 0.0 ? cos_i : 0.0) * PS_INV_PI;
+            /* Surface.facing(n, -wo), then Diffuse.eval toward w (float64: w is) */
+            float d[3] = {-wo[i], -wo[v + i], -wo[2 * v + i]}, back[3] = {wo[i], wo[v + i], wo[2 * v + i]}, nf[3];
+            ps_facing(n, d, nf);
+            double cos_i = ((double)nf[0] * w[0] + (double)nf[1] * w[1]) + (double)nf[2] * w[2];
+            double cos_over_pi = ps_max_zero_double(cos_i) * PS_INV_PI;
             for (int c = 0; c < CHANNELS; ++c)
                 value[c] = reflectance[c * m + id] * cos_over_pi;
             pdf_fwd = technique == DIFFUSE_COSINE ? cos_over_pi : (cos_i > 0.0 ? PS_INV_TWO_PI : 0.0);

@@ -96,11 +96,11 @@ static PyMethodDef module_methods[] = {
      "with probability `survival` (None: 1) decided by u (see ext/scatter.c)."},
     {"pt_vertex", ps_pt_vertex, METH_VARARGS,
      "pt_vertex(kind, reflectance, ior, albedo, table, area, two_sided, cdf, pmf, radiance, p, normal, eps, cos, "
-     "direction, material, beta, eta_scale, depth, u, cos_phi, sin_phi, diffuse_technique, heuristic, policy, "
-     "rr_depth, trapped_depth, exponent, probability, cap)\n--\n\n(value, useful, light_point, light_normal, "
-     "light_eps, normal, beta, alive, origin, direction, pdf, delta, eta_scale, light_samples): one vertex of a "
-     "path tracer's walks, next-event estimation, BSDF sample and roulette in one pass (see ext/pt_vertex.c and "
-     "pathspace.estimators.pt_fused)."},
+     "direction, material, beta, eta_scale, rr_scale, depth, u, cos_phi, sin_phi, diffuse_technique, heuristic, "
+     "policy, rr_depth, trapped_depth, exponent, probability, cap, bsdf_row, importance, reverse)\n--\n\n(value, "
+     "useful, light_point, light_normal, light_eps, normal, beta, alive, origin, direction, pdf, delta, eta_scale, "
+     "pdf_back, light_samples): one vertex of a path tracer's or a subpath's walks, next-event estimation, BSDF "
+     "sample and roulette in one pass (see ext/pt_vertex.c and pathspace.estimators.pt_fused)."},
     {"lens_connect", ps_lens_connect, METH_VARARGS,
      "lens_connect(p, n, wo, beta, material, entity, chosen, on_light, diffuse, reflectance, radiance, two_sided, "
      "position, forward, right, image_up, tan_x, tan_y, width, height, lens_area, technique, q, q_rev, g_prev)\n--"

@@ -1,17 +1,21 @@
 /*
- * One vertex of a path tracer's walks, fused (pathspace.estimators.pt, PathTracer._scatter for the scenes its
- * fused kernel serves), in one pass with the GIL released.  Per lane, at the surface point p its ray reached:
- *   1. next-event estimation (materials that are not specular, with light sampling on): a light sample on the
- *      area lights (ext/light_sample.h), the BSDF's f |cos| and density toward it, and its MIS-weighted value
- *      (ext/direct.h; Veach 1997, eqs. 9.4 and 9.13), left for the caller to test with a shadow ray;
+ * One vertex of a random walk, fused, in one pass with the GIL released: a path tracer's (pathspace.estimators.pt,
+ * PathTracer._scatter for the scenes its fused kernel serves), or a camera or light subpath's (pathspace.estimators
+ * .subpaths, _Growth._vertex).  Per lane, at the surface point p its ray reached:
+ *   1. the path tracer's next-event estimation (materials that are not specular, with light sampling on): a light
+ *      sample on the area lights (ext/light_sample.h), the BSDF's f |cos| and density toward it, and its
+ *      MIS-weighted value (ext/direct.h; Veach 1997, eqs. 9.4 and 9.13), left for the caller to test with a shadow
+ *      ray;
  *   2. a BSDF sample: Lambertian (cosine-weighted, ext/warp.h, or uniform over the hemisphere), a delta mirror,
  *      or a smooth dielectric (Fresnel-weighted choice of reflection and refraction, radiance scaled by
- *      1 / eta^2 on refraction; Veach 1997, sec. 5.2);
+ *      1 / eta^2 on refraction, importance not; Veach 1997, sec. 5.2); for subpaths, the density with which the
+ *      BSDF would sample the way back with light arriving along the sample (Veach 1997, eq. 10.7);
  *   3. Russian roulette's survival probability (pathspace.roulette.RussianRoulette.survival, every policy), and
  *      the step to the next ray: throughput, survival and origin (ext/scatter.h).
  * The BSDFs are those of pathspace.bsdfs (diffuse.py, mirror.py, dielectric.py and fresnel.py), which stay the
  * reference: every value is computed in the operations and order of the NumPy code, so that a render through
- * this kernel is bit for bit the render through NumPy (tests/estimators/test_pt_vertex_kernel.py).  RGB only.
+ * this kernel is bit for bit the render through NumPy (tests/estimators/test_pt_vertex_kernel.py and
+ * test_walk_kernel.py).  RGB only.
  */
 #include "diffuse.h"
 #include "direct.h"
@@ -38,6 +42,10 @@ enum { ROULETTE_OFF, ROULETTE_FIXED, ROULETTE_ALBEDO, ROULETTE_THROUGHPUT, ROULE
 typedef struct {
     int diffuse_technique, heuristic, policy, start_depth, trapped_depth;
     double exponent, probability, cap;
+    /* Walks other than the path tracer's (subpaths): the first row of the BSDF's numbers in u (3 after the light
+     * sample's, 0 for a subpath's), light transport from the lights ("importance") or not, and whether to give
+     * the reverse densities of the sampled directions. */
+    int bsdf_row, importance, reverse;
 } Options;
 
 /* pathspace.bsdfs.fresnel.fresnel_dielectric: the reflectance F and the cosine of the transmitted angle. */
@@ -100,10 +108,10 @@ static void sample_mirror(const double *reflectance, const float n[3], const flo
     s->eta = 1.0;
 }
 
-/* Dielectric.sample in "radiance" mode: interior index ior, wo arriving from the outside or not, u0 choosing
- * between reflection (probability F) and refraction. */
+/* Dielectric.sample: interior index ior, wo arriving from the outside or not, u0 choosing between reflection
+ * (probability F) and refraction; radiance scaled by 1 / eta^2 on refraction unless transporting importance. */
 static void sample_dielectric(double ior, int outside, const float n[3], const float wo[3], float cos_o, double u0,
-                              Sample *s)
+                              int importance, Sample *s)
 {
     double eta = outside ? ior : 1.0 / ior, cos_i = (double)cos_o, cos_t;
     double fresnel = fresnel_dielectric(cos_i, eta, &cos_t);
@@ -117,7 +125,7 @@ static void sample_dielectric(double ior, int outside, const float n[3], const f
     for (int k = 0; k < 3; ++k)
         s->wi[k] = (float)(w[k] / length);
     s->pdf = reflects ? fresnel : 1.0 - fresnel;
-    double scale = 1.0 / (eta * eta);
+    double scale = importance ? 1.0 : 1.0 / (eta * eta);
     for (int c = 0; c < CHANNELS; ++c)
         s->weight[c] = reflects ? 1.0 : scale;
     s->delta = 1;
@@ -137,10 +145,11 @@ static inline double clipped_max(const double *x, double cap)
 }
 
 /* RussianRoulette.survival at a vertex reached after `depth` segments, of a material with `albedo` (specular
- * or not), for a walk of throughput beta taking the sample s: "throughput" reads beta weight (eta_scale eta^2),
- * the throughput after the sample with the 1 / eta^2 of its refractions undone (Walk.survival). */
+ * or not), for a walk of throughput beta taking the sample s: "throughput" reads beta weight scale (Walk.survival:
+ * scale = eta_scale eta^2 undoes the 1 / eta^2 of a radiance walk's refractions; a light subpath's is its
+ * rr_scale, the throughput relative to the ray leaving the light). */
 static double survival(const Options *o, int depth, double albedo, int specular, const double *beta,
-                       const Sample *s, double eta_scale)
+                       const Sample *s, double scale)
 {
     if (depth < o->start_depth)
         return 1.0;
@@ -148,7 +157,7 @@ static double survival(const Options *o, int depth, double albedo, int specular,
         return 1.0 - o->probability;
     if (o->policy == ROULETTE_ALBEDO)
         return albedo < 0.0 ? 0.0 : (albedo > 1.0 ? 1.0 : albedo);
-    double scale = eta_scale * s->eta * s->eta, throughput[CHANNELS];
+    double throughput[CHANNELS];
     for (int c = 0; c < CHANNELS; ++c)
         throughput[c] = beta[c] * s->weight[c] * scale;
     double q = clipped_max(throughput, o->cap);
@@ -170,8 +179,8 @@ typedef struct {
     PsAreaLights lights;
     const float *p, *normal, *eps, *cos, *direction, *cos_phi, *sin_phi;
     const int32_t *material, *depth;
-    const double *beta, *eta_scale, *u;
-    double *value, *beta_out, *pdf, *eta_out;
+    const double *beta, *eta_scale, *rr_scale, *u;
+    double *value, *beta_out, *pdf, *eta_out, *pdf_back;
     npy_bool *useful, *alive, *delta;
     float *light_point, *light_normal, *light_eps, *normal_out, *origin, *wi;
 } VertexArrays;
@@ -254,12 +263,13 @@ static void scatter(const VertexArrays *va, const Options *o, int roulette, cons
             wo[c] = -va->direction[c * n + i];
         const double *colour = va->reflectance + m;
         double tint[CHANNELS] = {colour[0], colour[va->materials], colour[2 * va->materials]};
+        const double *u = va->u + o->bsdf_row * n + i; /* the BSDF's numbers u[0], u[n], u[2 n] */
         if (k == KIND_DIFFUSE)
-            sample_diffuse(o, tint, nf, va->u[4 * n + i], va->cos_phi[i], va->sin_phi[i], s);
+            sample_diffuse(o, tint, nf, u[n], va->cos_phi[i], va->sin_phi[i], s);
         else if (k == KIND_MIRROR)
             sample_mirror(tint, nf, wo, cos_o, s);
         else
-            sample_dielectric(va->ior[m], outside, nf, wo, cos_o, va->u[3 * n + i], s);
+            sample_dielectric(va->ior[m], outside, nf, wo, cos_o, u[0], o->importance, s);
     }
     for (npy_intp i = start; i < end; ++i) {
         const Sample *s = samples + (i - start);
@@ -267,12 +277,13 @@ static void scatter(const VertexArrays *va, const Options *o, int roulette, cons
         double b[CHANNELS], next[CHANNELS];
         for (int c = 0; c < CHANNELS; ++c)
             b[c] = va->beta[c * n + i];
-        double scale = va->eta_scale ? va->eta_scale[i] : 1.0;
+        double eta_scale = va->eta_scale ? va->eta_scale[i] : 1.0;
+        double scale = o->importance ? (va->rr_scale ? va->rr_scale[i] : 1.0) : eta_scale * s->eta * s->eta;
         double q = roulette ? survival(o, va->depth[i], va->albedo[m], va->kind[m] != KIND_DIFFUSE, b, s, scale) : 1.0;
         float x[3] = {va->p[i], va->p[n + i], va->p[2 * n + i]}, from[3],
               ng[3] = {va->normal[i], va->normal[n + i], va->normal[2 * n + i]};
-        va->alive[i] = (npy_bool)ps_scatter(CHANNELS, b, s->weight, roulette ? &q : NULL, va->u[6 * n + i], x, ng,
-                                           va->eps[i], s->wi, next, from);
+        va->alive[i] = (npy_bool)ps_scatter(CHANNELS, b, s->weight, roulette ? &q : NULL,
+                                           va->u[(o->bsdf_row + 3) * n + i], x, ng, va->eps[i], s->wi, next, from);
         for (int c = 0; c < 3; ++c) {
             va->beta_out[c * n + i] = next[c];
             va->origin[c * n + i] = from[c];
@@ -281,15 +292,26 @@ static void scatter(const VertexArrays *va, const Options *o, int roulette, cons
         va->pdf[i] = s->pdf;
         va->delta[i] = (npy_bool)s->delta;
         if (va->eta_out)
-            va->eta_out[i] = scale * s->eta * s->eta;
+            va->eta_out[i] = eta_scale * s->eta * s->eta;
+        if (va->pdf_back) { /* subpaths.reverse_pdf: light arriving along the sample, toward where the walk came */
+            float away[3] = {-s->wi[0], -s->wi[1], -s->wi[2]}, nr[3], back[3];
+            for (int c = 0; c < 3; ++c)
+                back[c] = -va->direction[c * n + i];
+            double pdf_back = 0.0;
+            if (!s->delta) {
+                ps_facing(ng, away, nr);
+                ps_diffuse_eval(o->diffuse_technique, nr, back, &pdf_back);
+            }
+            va->pdf_back[i] = pdf_back;
+        }
     }
 }
 
 enum {
     A_KIND, A_REFLECTANCE, A_IOR, A_ALBEDO,                                  /* materials */
     A_TABLE, A_AREA, A_TWO_SIDED, A_CDF, A_PMF, A_RADIANCE,                  /* emitting triangles */
-    A_P, A_NORMAL, A_EPS, A_COS, A_DIRECTION, A_MATERIAL, A_BETA, A_ETA_SCALE, A_DEPTH, A_U, A_COS_PHI,
-    A_SIN_PHI,                                                               /* lanes */
+    A_P, A_NORMAL, A_EPS, A_COS, A_DIRECTION, A_MATERIAL, A_BETA, A_ETA_SCALE, A_RR_SCALE, A_DEPTH, A_U,
+    A_COS_PHI, A_SIN_PHI,                                                    /* lanes */
     A_COUNT
 };
 
@@ -303,12 +325,14 @@ static const PsArraySpec SPECS[A_COUNT] = {
     {"eps", NPY_FLOAT, "float32", 1, 0},        {"cos", NPY_FLOAT, "float32", 1, 0},
     {"direction", NPY_FLOAT, "float32", 2, 0},  {"material", NPY_INT32, "int32", 1, 0},
     {"beta", NPY_DOUBLE, "float64", 2, 0},      {"eta_scale", NPY_DOUBLE, "float64", 1, 1},
-    {"depth", NPY_INT32, "int32", 1, 0},        {"u", NPY_DOUBLE, "float64", 2, 0},
+    {"rr_scale", NPY_DOUBLE, "float64", 1, 1},  {"depth", NPY_INT32, "int32", 1, 0},
+    {"u", NPY_DOUBLE, "float64", 2, 0},
     {"cos_phi", NPY_FLOAT, "float32", 1, 0},    {"sin_phi", NPY_FLOAT, "float32", 1, 0},
 };
 
 /* The shapes of the arguments: materials (M,) and (3, M), emitting triangles (13, E), (E,) and (3, E) (all or
- * none of them), lanes (N,), (3, N) and u (7, N); 0, or -1 with a ValueError. */
+ * none of them), lanes (N,), (3, N) and u (R, N) with the BSDF's and roulette's numbers in rows bsdf_row ..
+ * bsdf_row + 3 and, with light samples, the light's in rows 0 .. 2 below them; 0, or -1 with a ValueError. */
 static int check_shapes(PyArrayObject **a, Options *o)
 {
     npy_intp m = PyArray_DIM(a[A_KIND], 0), n = PyArray_DIM(a[A_DEPTH], 0);
@@ -340,17 +364,32 @@ static int check_shapes(PyArrayObject **a, Options *o)
     }
     for (int k = A_P; k < A_COUNT; ++k) {
         PyArrayObject *x = a[k];
-        if (!x)
+        if (!x || k == A_U)
             continue;
-        int rows = k == A_U ? 7 : (PyArray_NDIM(x) == 2 ? 3 : 0);
+        int rows = PyArray_NDIM(x) == 2 ? 3 : 0;
         if (PyArray_DIM(x, PyArray_NDIM(x) - 1) != n || (rows && PyArray_DIM(x, 0) != rows)) {
             PyErr_Format(PyExc_ValueError, "pt_vertex: %s must have shape %s with N = %zd (the lanes of depth)",
-                         SPECS[k].name, rows == 7 ? "(7, N)" : (rows ? "(3, N)" : "(N,)"), (Py_ssize_t)n);
+                         SPECS[k].name, rows ? "(3, N)" : "(N,)", (Py_ssize_t)n);
             return -1;
         }
     }
-    if (o->policy == ROULETTE_THROUGHPUT && !a[A_ETA_SCALE]) {
+    if (o->bsdf_row < (lights ? 3 : 0) || PyArray_DIM(a[A_U], 0) < (npy_intp)o->bsdf_row + 4 ||
+        PyArray_DIM(a[A_U], 1) != n) {
+        PyErr_Format(PyExc_ValueError, "pt_vertex: u must have shape (R, N) with N = %zd and the BSDF's and roulette's "
+                                       "numbers in rows %d .. %lld, after the light sample's (rows 0 .. 2) if taken",
+                     (Py_ssize_t)n, o->bsdf_row, (long long)o->bsdf_row + 3);
+        return -1;
+    }
+    if (o->policy == ROULETTE_THROUGHPUT && !o->importance && !a[A_ETA_SCALE]) {
         PyErr_SetString(PyExc_ValueError, "pt_vertex: throughput roulette reads eta_scale, which is None");
+        return -1;
+    }
+    if (o->policy == ROULETTE_THROUGHPUT && o->importance && !a[A_RR_SCALE]) {
+        PyErr_SetString(PyExc_ValueError, "pt_vertex: throughput roulette of importance reads rr_scale, which is None");
+        return -1;
+    }
+    if ((a[A_ETA_SCALE] && o->importance) || (a[A_RR_SCALE] && !o->importance)) {
+        PyErr_SetString(PyExc_ValueError, "pt_vertex: eta_scale is for radiance, rr_scale for importance");
         return -1;
     }
     return 0;
@@ -359,7 +398,7 @@ static int check_shapes(PyArrayObject **a, Options *o)
 /* The outputs, in the order returned. */
 enum {
     O_VALUE, O_USEFUL, O_LIGHT_POINT, O_LIGHT_NORMAL, O_LIGHT_EPS, O_NORMAL, O_BETA, O_ALIVE, O_ORIGIN, O_WI, O_PDF,
-    O_DELTA, O_ETA_SCALE, O_COUNT
+    O_DELTA, O_ETA_SCALE, O_PDF_BACK, O_COUNT
 };
 
 int ps_add_pt_vertex_constants(PyObject *module)
@@ -392,17 +431,25 @@ PyObject *ps_pt_vertex(PyObject *module, PyObject *args)
     (void)module;
     PyObject *objs[A_COUNT];
     Options o;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOOOOOOOOOiiiiiddd:pt_vertex", &objs[0], &objs[1], &objs[2],
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOOOOOOOOOOiiiiidddiii:pt_vertex", &objs[0], &objs[1], &objs[2],
                           &objs[3], &objs[4], &objs[5], &objs[6], &objs[7], &objs[8], &objs[9], &objs[10],
                           &objs[11], &objs[12], &objs[13], &objs[14], &objs[15], &objs[16], &objs[17], &objs[18],
-                          &objs[19], &objs[20], &objs[21], &o.diffuse_technique, &o.heuristic, &o.policy,
-                          &o.start_depth, &o.trapped_depth, &o.exponent, &o.probability, &o.cap))
+                          &objs[19], &objs[20], &objs[21], &objs[22], &o.diffuse_technique, &o.heuristic, &o.policy,
+                          &o.start_depth, &o.trapped_depth, &o.exponent, &o.probability, &o.cap, &o.bsdf_row,
+                          &o.importance, &o.reverse))
         return NULL;
     if (o.diffuse_technique < DIFFUSE_COSINE || o.diffuse_technique > DIFFUSE_UNIFORM || o.heuristic < -1 ||
         o.heuristic > MIS_UNIFORM || o.policy < ROULETTE_OFF || o.policy >= ROULETTE_COUNT) {
         PyErr_Format(PyExc_ValueError, "pt_vertex: diffuse technique 0 or 1, heuristic -1 (no light samples) to 3 "
                                        "and roulette policy 0 to 3 expected, got %d, %d and %d",
                      o.diffuse_technique, o.heuristic, o.policy);
+        return NULL;
+    }
+    if (o.bsdf_row < 0 || (o.importance != 0 && o.importance != 1) || (o.reverse != 0 && o.reverse != 1) ||
+        (o.importance && o.heuristic >= 0)) {
+        PyErr_Format(PyExc_ValueError, "pt_vertex: bsdf_row >= 0, importance and reverse 0 or 1, and no light "
+                                       "samples when transporting importance expected, got %d, %d and %d",
+                     o.bsdf_row, o.importance, o.reverse);
         return NULL;
     }
     PyArrayObject *a[A_COUNT];
@@ -425,6 +472,7 @@ PyObject *ps_pt_vertex(PyObject *module, PyObject *args)
         PyArray_SimpleNew(2, dims3, NPY_FLOAT),  PyArray_SimpleNew(2, dims3, NPY_FLOAT),
         PyArray_SimpleNew(1, &n, NPY_DOUBLE),    PyArray_SimpleNew(1, &n, NPY_BOOL),
         a[A_ETA_SCALE] ? PyArray_SimpleNew(1, &n, NPY_DOUBLE) : Py_NewRef(Py_None),
+        o.reverse ? PyArray_SimpleNew(1, &n, NPY_DOUBLE) : Py_NewRef(Py_None),
     };
     if (!ps_outputs_allocated(out, O_COUNT))
         return NULL;
@@ -438,12 +486,13 @@ PyObject *ps_pt_vertex(PyObject *module, PyObject *args)
         .p = IN(A_P, float), .normal = IN(A_NORMAL, float), .eps = IN(A_EPS, float), .cos = IN(A_COS, float),
         .direction = IN(A_DIRECTION, float), .cos_phi = IN(A_COS_PHI, float), .sin_phi = IN(A_SIN_PHI, float),
         .material = IN(A_MATERIAL, int32_t), .depth = IN(A_DEPTH, int32_t), .beta = IN(A_BETA, double),
-        .eta_scale = IN(A_ETA_SCALE, double), .u = IN(A_U, double),
+        .eta_scale = IN(A_ETA_SCALE, double), .rr_scale = IN(A_RR_SCALE, double), .u = IN(A_U, double),
         .value = OUT(O_VALUE, double), .useful = OUT(O_USEFUL, npy_bool), .light_point = OUT(O_LIGHT_POINT, float),
         .light_normal = OUT(O_LIGHT_NORMAL, float), .light_eps = OUT(O_LIGHT_EPS, float),
         .normal_out = OUT(O_NORMAL, float), .beta_out = OUT(O_BETA, double), .alive = OUT(O_ALIVE, npy_bool),
         .origin = OUT(O_ORIGIN, float), .wi = OUT(O_WI, float), .pdf = OUT(O_PDF, double),
         .delta = OUT(O_DELTA, npy_bool), .eta_out = a[A_ETA_SCALE] ? OUT(O_ETA_SCALE, double) : NULL,
+        .pdf_back = o.reverse ? OUT(O_PDF_BACK, double) : NULL,
     };
 #undef IN
 #undef OUT
@@ -473,6 +522,6 @@ PyObject *ps_pt_vertex(PyObject *module, PyObject *args)
         PyErr_Format(PyExc_IndexError, "pt_vertex: material[%zd] is not a material of the table", (Py_ssize_t)bad);
         return NULL;
     }
-    return Py_BuildValue("(NNNNNNNNNNNNNn)", out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7], out[8],
-                         out[9], out[10], out[11], out[12], (Py_ssize_t)light_samples);
+    return Py_BuildValue("(NNNNNNNNNNNNNNn)", out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7], out[8],
+                         out[9], out[10], out[11], out[12], out[13], (Py_ssize_t)light_samples);
 }

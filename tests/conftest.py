@@ -46,6 +46,18 @@ def same_bits(a: np.ndarray, b: np.ndarray, what: str = "") -> None:
     np.testing.assert_array_equal(a, b, err_msg=what)
 
 
+def balanced_triangles(mesh, rng: np.random.Generator, n: int) -> np.ndarray:
+    """n random triangles (int32) of ``mesh``, about as many of each of its materials (a scene's spheres have far
+    more triangles than its walls)."""
+    groups = [np.flatnonzero(mesh.material == m) for m in np.unique(mesh.material)]
+    group = rng.integers(0, len(groups), n)
+    prim = np.empty(n, np.int32)
+    for k, triangles in enumerate(groups):
+        mine = group == k
+        prim[mine] = rng.choice(triangles, int(mine.sum()))
+    return prim
+
+
 def count_lanes(monkeypatch, kernel: str, argument: int) -> list[int]:
     """Wrap ``_native.<kernel>`` so that it counts the lanes it is given (the size of its positional
     ``argument``); returns the count, a list of one number that grows with each call."""

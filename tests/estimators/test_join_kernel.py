@@ -60,7 +60,8 @@ def test_fused_bdpt_equals_numpy(name, config, kernel_calls):
     assert min(counts) > 0
     numpy = ps.render(sc, "bdpt", spp=2, seed=5, threads=1, kernel="numpy", **CONFIGS[config])
     assert (joins[0], lens[0]) == counts
-    assert sum("in one C pass" in line for line in fused.stats["plan"]) == 2
+    for what in ("subpath vertices", "light and camera vertices joined", "light vertices joined to the camera"):
+        assert f"{what} in one C pass (a fused kernel) in RGB, in NumPy when spectral" in fused.stats["plan"]
     assert fused.stats["rays"] == numpy.stats["rays"]
     for field in ("scaled_mean", "scaled_m2", "exponent"):
         same_bits(getattr(fused.film.moments, field), getattr(numpy.film.moments, field), field)

@@ -133,7 +133,7 @@ def test_fused_connections_equal_numpy_on_extreme_vertices(name, seed, occlusion
     options = {"diffuse_sampling": technique}
     parts = {}
     for kernel in ("fused", "numpy"):
-        fused, _ = lens_kernel(sc, RGBColours, densities, options, kernel)
+        fused, _ = lens_kernel(sc, RGBColours, options, kernel)
         batch = Batch(sc, light, None, None, RGBColours, options, 100, np.array([0, light.lane.size]),
                       densities=densities, made=[], lens_kernel=fused)
         with np.errstate(all="ignore"):
@@ -155,24 +155,23 @@ def test_fused_connections_equal_numpy_on_extreme_vertices(name, seed, occlusion
 def test_scenes_and_settings_the_kernel_does_not_serve_say_why():
     box = scene("cornell-box")
     cases = [
-        (scene("cornell-box-thin-lens"), RGBColours, False, "fused", "a camera other than a pinhole"),
-        (scene("cornell-box-point-light"), RGBColours, False, "fused", "lights other than area lights"),
-        (scene("veach-mis"), RGBColours, False, "fused", "material 'plate1' is conductor"),
-        (box, SpectralColours(np.full((4, 1), 550.0), None, None), False, "fused", "spectral"),
-        (box, RGBColours, False, "numpy", "kernel='numpy'"),
+        (scene("cornell-box-thin-lens"), RGBColours, "fused", "a camera other than a pinhole"),
+        (scene("cornell-box-point-light"), RGBColours, "fused", "lights other than area lights"),
+        (scene("veach-mis"), RGBColours, "fused", "material 'plate1' is conductor"),
+        (box, SpectralColours(np.full((4, 1), 550.0), None, None), "fused", "spectral"),
+        (box, RGBColours, "numpy", "kernel='numpy'"),
     ]
-    for sc, colours, densities, kernel, reason in cases:
-        fused, why = lens_kernel(sc, colours, densities, {}, kernel)
+    for sc, colours, kernel, reason in cases:
+        fused, why = lens_kernel(sc, colours, {}, kernel)
         assert fused is None and reason in why
-    for densities in (False, True):
-        assert lens_kernel(box, RGBColours, densities, {}, "fused")[0] is not None
+    assert lens_kernel(box, RGBColours, {"diffuse_sampling": "uniform"}, "fused")[0].technique == 1
     assert any("camera in NumPy (a camera other than a pinhole)" in line
                for line in LightTracer().plan(scene("cornell-box-thin-lens")))
 
 
 def kernel_args(k: int = 3, densities: bool = False):
     sc = scene("cornell-box")
-    fused, _ = lens_kernel(sc, RGBColours, False, {}, "fused")
+    fused, _ = lens_kernel(sc, RGBColours, {}, "fused")
     v = 4
     vectors = [np.ones((3, v), np.float32)] * 3
     camera = sc.camera
@@ -214,6 +213,7 @@ def test_lens_connect_refuses_a_light_vertex_off_the_emitting_triangles():
 
 @pytest.mark.parametrize("position, value, error, match", [
     (22, np.ones(3), ValueError, "q, q_rev and g_prev must all be None or all"),
+    (24, np.ones(5), ValueError, "q, q_rev and g_prev must all be None or all"),
     (23, None, ValueError, "q, q_rev and g_prev must all be None or all"),
     (24, np.ones(4, np.float32), TypeError, "g_prev"),
 ])

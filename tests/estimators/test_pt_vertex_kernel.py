@@ -29,7 +29,7 @@ from pathspace.roulette import TRAPPED_DEPTH
 from pathspace.sampler import ReplaySampler
 from pathspace.spectra import RGBMode, SpectralMode
 
-from conftest import count_lanes, same_bits
+from conftest import balanced_triangles, count_lanes, same_bits
 from conftest import repository_scene as scene
 
 CONFIGS = {
@@ -51,7 +51,7 @@ CONFIGS = {
 @pytest.fixture
 def kernel_calls(monkeypatch):
     """The number of lanes the fused kernel took so far (a list of one count)."""
-    return count_lanes(monkeypatch, "pt_vertex", 18)
+    return count_lanes(monkeypatch, "pt_vertex", 19)
 
 
 def render(sc, **params):
@@ -95,7 +95,7 @@ def extreme_walk(sc, tracer: PathTracer, seed: int, n: int = 6000, deep: bool = 
     below 1 or 1."""
     rng = np.random.default_rng(seed)
     mesh = sc.mesh
-    prim = rng.integers(0, mesh.material.size, n).astype(np.int32)
+    prim = balanced_triangles(mesh, rng, n)
     b1, b2 = rng.random(n), rng.random(n)
     flip = b1 + b2 > 1
     b1[flip], b2[flip] = 1 - b1[flip], 1 - b2[flip]
@@ -210,14 +210,22 @@ def kernel_args(n: int = 4):
     fused, _ = fused_vertex(tracer, sc, RGBMode(), "mis", 2)
     p = np.zeros((3, n), np.float32)
     lanes = [p, p, np.zeros(n, np.float32), np.ones(n, np.float32), p, np.zeros(n, np.int32), np.ones((3, n)),
-             np.ones(n), np.ones(n, np.int32), np.full((7, n), 0.5), np.ones(n, np.float32), np.zeros(n, np.float32)]
-    return [*fused.materials, *fused.lights, *lanes, *fused.options]
+             np.ones(n), None, np.ones(n, np.int32), np.full((7, n), 0.5), np.ones(n, np.float32),
+             np.zeros(n, np.float32)]
+    return [*fused.materials, *fused.lights, *lanes, *fused.options, *fused.walk]
 
 
 @pytest.mark.parametrize("position, value, error, match", [
     (15, np.full(4, 7, np.int32), IndexError, r"material\[0\] is not a material"),
     (15, np.full(4, -1, np.int32), IndexError, r"material\[0\] is not a material"),
-    (19, np.full((6, 4), 0.5), ValueError, r"u must have shape \(7, N\)"),
+    (20, np.full((6, 4), 0.5), ValueError, r"u must have shape \(R, N\) with N = 4 .* rows 3 \.\. 6"),
+    (20, np.full((7, 5), 0.5), ValueError, r"u must have shape \(R, N\) with N = 4"),
+    (31, 0, ValueError, r"u must have shape .* after the light sample's \(rows 0 \.\. 2\) if taken"),
+    (31, -1, ValueError, "bsdf_row >= 0"),
+    (32, 2, ValueError, "importance and reverse 0 or 1"),
+    (33, -1, ValueError, "importance and reverse 0 or 1"),
+    (32, 1, ValueError, "no light samples when transporting importance"),
+    (18, np.ones(4), ValueError, "eta_scale is for radiance, rr_scale for importance"),
     (10, np.zeros((3, 5), np.float32), ValueError, r"p must have shape \(3, N\) with N = 4"),
     (10, np.zeros((4, 3), np.float32).T, ValueError, "p must be C-contiguous"),
     (17, None, ValueError, "eta_scale"),
@@ -227,10 +235,10 @@ def kernel_args(n: int = 4):
     (1, np.ones((3, 4)), ValueError, r"reflectance \(3, M\)"),
     (0, np.full(3, 5, np.int8), ValueError, "not a material kind"),
     (16, np.ones((3, 4), np.float32), TypeError, "beta"),
-    (22, 2, ValueError, "diffuse technique"),
-    (23, 4, ValueError, "heuristic"),
-    (23, -2, ValueError, "heuristic"),
-    (24, 9, ValueError, "roulette policy"),
+    (23, 2, ValueError, "diffuse technique"),
+    (24, 4, ValueError, "heuristic"),
+    (24, -2, ValueError, "heuristic"),
+    (25, 9, ValueError, "roulette policy"),
 ])
 def test_pt_vertex_refuses_bad_arguments(position, value, error, match):
     args = kernel_args()
@@ -241,10 +249,10 @@ def test_pt_vertex_refuses_bad_arguments(position, value, error, match):
 
 def test_pt_vertex_takes_valid_arguments_and_no_lanes():
     out = _native.pt_vertex(*kernel_args())
-    assert len(out) == 14 and out[0].shape == (3, 4) and out[13] == 4
+    assert len(out) == 15 and out[0].shape == (3, 4) and out[13] is None and out[14] == 4
     assert out[7].dtype == bool
     out = _native.pt_vertex(*kernel_args(0))
-    assert out[0].shape == (3, 0) and out[13] == 0
+    assert out[0].shape == (3, 0) and out[14] == 0
 
 
 @pytest.mark.parametrize("kernel, args", [

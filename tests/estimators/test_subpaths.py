@@ -117,31 +117,54 @@ def test_the_light_tracer_makes_while_walking_the_connections_of_kept_subpaths()
         np.testing.assert_array_equal(value, made[1][name], err_msg=name)
 
 
-def test_walks_without_densities_carry_and_record_none(monkeypatch):
+@pytest.mark.parametrize("kernel", ["fused", "numpy"])
+def test_walks_without_densities_carry_and_record_none(kernel, monkeypatch):
     """A light tracer's walks keep no density state per lane (q, the previous vertex's normal) and record no
     densities; BDPT's keep and record them."""
     from pathspace.estimators import subpaths
-    from pathspace.estimators.walk import Walk
 
     fields, recorded = [], []
-    scatter, add = Walk.scatter, subpaths._Recorder.add
+    vertex, add = subpaths._Growth._vertex, subpaths._Recorder.add
 
-    def seen_scatter(self, *args, **kwargs):
-        fields.append(self.lanes.fields)
-        return scatter(self, *args, **kwargs)
+    def seen_vertex(self, *args, **kwargs):
+        fields.append(self.walk.lanes.fields)
+        return vertex(self, *args, **kwargs)
 
     def seen_add(self, *args, **kwargs):
         record = add(self, *args, **kwargs)
         recorded.append(set(record))
         return record
 
-    monkeypatch.setattr(Walk, "scatter", seen_scatter)
+    monkeypatch.setattr(subpaths._Growth, "_vertex", seen_vertex)
     monkeypatch.setattr(subpaths._Recorder, "add", seen_add)
     scene = ps.load_scene(CORNELL, resolution=(8, 8))
     for estimator, densities in (("lt", False), ("bdpt", True)):
         fields.clear()
         recorded.clear()
-        ps.render(scene, estimator, spp=1, threads=1)
+        ps.render(scene, estimator, spp=1, threads=1, kernel=kernel)
         assert fields and recorded
         assert all(("q" in f and "prev_n" in f and "prev_infinite" in f) == densities for f in fields), estimator
         assert all(({"rev", "g_prev", "q", "q_rev"} <= names) == densities for names in recorded), estimator
+
+
+def test_walks_without_densities_cannot_record_lens_hits_or_vertices_at_infinity():
+    """Rays through a thin lens and vertices at infinity are recorded with their densities."""
+    from pathspace.estimators.subpaths import SubpathSettings, camera_subpaths
+    from pathspace.roulette import RussianRoulette
+    from pathspace.sampler import ReplaySampler
+    from pathspace.spectra import RGBColours
+
+    thin_lens = ps.load_scene(CORNELL.parent.parent / "cornell-box-thin-lens" / "scene.toml", resolution=(8, 8))
+    environment = ps.scene_from_dict({
+        "camera": {"position": [0, 0, 5], "look_at": [0, 0, 0], "fov": 30, "resolution": [8, 8]},
+        "materials": {"grey": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
+        "shapes": [{"type": "quad", "corner": [-1, -1, 0], "edge_u": [2, 0, 0], "edge_v": [0, 2, 0],
+                    "material": "grey"}],
+        "lights": [{"type": "environment", "radiance": [1, 1, 1]}]})
+    roulette = RussianRoulette("albedo", 1)
+    for sc, walk in ((thin_lens, lambda settings, sampler: light_subpaths(settings, 4, sampler, True)),
+                     (environment, lambda settings, sampler: camera_subpaths(settings, np.arange(4), sampler))):
+        settings = SubpathSettings(sc, RGBColours, {}, roulette, roulette, 8, Counters(), RenderControl(),
+                                   densities=False)
+        with pytest.raises(ValueError, match="recorded with their densities"):
+            walk(settings, ReplaySampler(np.full((4, 64), 0.5)))

@@ -36,8 +36,10 @@ pyramid : int, default 0
     strategy (s, t), the unweighted and the weighted contribution images
     (Veach's pyramid; ``RenderResult.strategies``).
 kernel : "fused" (default) or "numpy"
-    "fused" joins light and camera vertices (s, t >= 2) and light vertices
-    and the camera (t = 1) in one C pass each where the scene allows (see
+    "fused" takes the subpaths' vertices (BSDF sample, roulette, reverse
+    density), joins light and camera vertices (s, t >= 2) and joins light
+    vertices and the camera (t = 1) in one C pass each where the scene
+    allows (see :func:`pathspace.estimators.pt_fused.walk_vertex`,
     :mod:`pathspace.estimators.join_fused` and
     :mod:`pathspace.estimators.lens_fused`); "numpy" always in the NumPy
     code, the reference.  Both give the same image bit for bit.
@@ -68,7 +70,6 @@ class BDPT(Bidirectional):
     mis_beta: float = p.mis_beta()
     strategy: tuple | None = p.mis_strategy()
     mis_strategies: object = p.mis_strategies()
-    kernel: str = p.kernel("the joining of vertices (s, t >= 2, and t = 1)")
 
     name = "bdpt"
     uses_lens_hits = True
@@ -89,7 +90,8 @@ class BDPT(Bidirectional):
                    "none": "no MIS: every strategy weighted 1 (the image is the sum of the strategies)"}[self.mis]
         if self.mis_strategies is not None:
             weights += f", over the strategies {self.mis_strategies.spec!r} only (the others get weight 0)"
-        lines = [f"bidirectional path tracing, max_depth={depth}; {weights}", self._roulette_plan()]
+        lines = [f"bidirectional path tracing, max_depth={depth}; {weights}", self._roulette_plan(),
+                 self._walk_plan(scene)]
         camera, lights = scene.camera, scene.lights
         lines.append("pinhole camera: no t = 0 strategy (rays cannot hit it)" if camera.delta_position
                      else "thin-lens camera: t = 0 strategy (light subpaths passing through the lens)")
@@ -101,16 +103,18 @@ class BDPT(Bidirectional):
         if delta:
             lines.append(f"specular materials ({', '.join(delta)}): no connection through their vertices")
         options = {"diffuse_sampling": self.diffuse_sampling}
-        for what, gate in (("light and camera vertices joined", join_kernel),
-                           ("light vertices joined to the camera", lens_kernel)):
-            fused, reason = gate(scene, RGBColours, True, options, self.kernel)
+        for what, fused, reason in (("light and camera vertices joined",
+                                     *join_kernel(scene, RGBColours, True, options, self.kernel)),
+                                    ("light vertices joined to the camera",
+                                     *lens_kernel(scene, RGBColours, options, self.kernel))):
             lines.append(f"{what} in one C pass (a fused kernel) in RGB, in NumPy when spectral" if fused is not None
                          else f"{what} in NumPy ({reason})")
         return lines
 
     def _kernels(self, scene, settings: SubpathSettings) -> dict:
-        return {name: gate(scene, settings.colours, settings.densities, settings.options, self.kernel)[0]
-                for name, gate in (("join_kernel", join_kernel), ("lens_kernel", lens_kernel))}
+        return {"join_kernel": join_kernel(scene, settings.colours, settings.densities, settings.options,
+                                           self.kernel)[0],
+                "lens_kernel": lens_kernel(scene, settings.colours, settings.options, self.kernel)[0]}
 
     def check(self, scene) -> None:
         """Nothing in a scene stops BDPT (strategies a scene makes infeasible get weight 0)."""

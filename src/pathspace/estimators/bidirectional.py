@@ -25,12 +25,13 @@ import numpy as np
 
 from ..roulette import RussianRoulette, roulette_warnings
 from ..sampler import Sampler
-from ..spectra import RGBMode
+from ..spectra import RGBColours, RGBMode
 from . import parameters as p
 from .base import Counters, Estimator, ItemResult, RenderJob, Splats, WorkItem
 from .connections import Batch, Contributions
 from .control import RenderControl
-from .subpaths import SAFETY_VERTICES, SubpathSettings, camera_subpaths, light_subpaths
+from .pt_fused import walk_vertex
+from .subpaths import LIGHT_VERTEX, SAFETY_VERTICES, SubpathSettings, camera_subpaths, light_subpaths
 from .wavefront import Lanes
 
 __all__ = ["Bidirectional", "StrategyContributions", "STREAMS"]
@@ -82,6 +83,7 @@ class Bidirectional(Estimator):
     light_rr_cap: float | None = p.light_rr_cap()
     diffuse_sampling: str = p.diffuse_sampling()
     pyramid: int = p.pyramid()
+    kernel: str = p.kernel("the subpaths' vertices and their connections")
     roulette: RussianRoulette = field(init=False, repr=False)
     light_roulette: RussianRoulette = field(init=False, repr=False)
 
@@ -95,6 +97,13 @@ class Bidirectional(Estimator):
         self.light_roulette = RussianRoulette(*(own if own is not None else camera for own, camera in (
             (self.light_rr, self.rr), (self.light_rr_depth, self.rr_depth),
             (self.light_rr_probability, self.rr_probability), (self.light_rr_cap, self.rr_cap))))
+
+    def _walk_plan(self, scene) -> str:
+        """Where the subpaths' vertices (BSDF sample, roulette) are taken on ``scene``."""
+        fused, reason = walk_vertex(scene, RGBColours, self.light_roulette, {"diffuse_sampling": self.diffuse_sampling},
+                                    LIGHT_VERTEX, "importance", self.uses_densities, self.kernel)
+        return ("subpath vertices in one C pass (a fused kernel) in RGB, in NumPy when spectral" if fused is not None
+                else f"subpath vertices in NumPy ({reason})")
 
     def _roulette_plan(self) -> str:
         if self.roulette == self.light_roulette or not self.uses_camera_subpaths:
@@ -227,7 +236,7 @@ class Bidirectional(Estimator):
         state = Lanes(mode.path_fields, **mode.start(samplers["wavelengths"].draw(mode.camera_dims)))
         settings = SubpathSettings(scene, mode.colours(state), {"diffuse_sampling": self.diffuse_sampling},
                                    self.roulette, self.light_roulette, self.depth_limit + 1, counters, control,
-                                   self.uses_densities)
+                                   self.uses_densities, self.kernel)
         return state, settings
 
     def _weighted(self, part: Contributions, batch: Batch, pixels: np.ndarray):

@@ -198,7 +198,7 @@ def lens_samples(batch: Batch, light: Subpaths | None = None) -> Contributions |
     if not y.size:
         return None
     if batch.lens_kernel is not None:   # a pinhole: beta times what y sends (and the densities) in C
-        joined = batch.lens_kernel(light, y.v, on_light.take(y.v))
+        joined = batch.lens_kernel(light, y.v, on_light.take(y.v), batch.densities)
         we, pdf_lens = camera.importance_of(joined.cos, joined.on_film), joined.pdf
         with np.errstate(divide="ignore", invalid="ignore"):
             value = np.where(joined.on_film & (we > 0) & (pdf_lens > 0), joined.sent * (we / pdf_lens), 0.0)

@@ -61,8 +61,8 @@ class LensJoin:
 @dataclass(frozen=True, eq=False)
 class LensKernel:
     """The tables ``ext/lens_connect.c`` reads for one scene: which materials are diffuse and their
-    reflectance, the emitting triangles' radiance and sidedness, the pinhole camera, the diffuse sampling
-    technique and whether the connections carry MIS densities."""
+    reflectance, the emitting triangles' radiance and sidedness, the pinhole camera and the diffuse sampling
+    technique."""
 
     diffuse: np.ndarray       # (M,) bool
     reflectance: np.ndarray   # (3, M) float64
@@ -70,15 +70,14 @@ class LensKernel:
     two_sided: np.ndarray     # (E,) bool
     camera: PinholeCamera
     technique: int            # index in DIFFUSE_SAMPLING
-    densities: bool
 
-    def __call__(self, light, chosen: np.ndarray, on_light: np.ndarray) -> LensJoin:
+    def __call__(self, light, chosen: np.ndarray, on_light: np.ndarray, densities: bool) -> LensJoin:
         """The vertices ``chosen`` (int64 indices) of the subpaths ``light``, those on lights where ``on_light``,
-        joined to the pinhole."""
+        joined to the pinhole, with the MIS ``densities`` or without."""
         camera = self.camera
         vertices = (np.ascontiguousarray(a) for a in (light.p, light.n, light.wo, light.beta, light.material,
                                                       light.entity))
-        densities = ((np.ascontiguousarray(a) for a in (light.q, light.q_rev, light.g_prev)) if self.densities
+        densities = ((np.ascontiguousarray(a) for a in (light.q, light.q_rev, light.g_prev)) if densities
                      else (None, None, None))
         return LensJoin(*_native.lens_connect(
             *vertices, np.ascontiguousarray(chosen, np.int64), np.ascontiguousarray(on_light), self.diffuse,
@@ -87,10 +86,10 @@ class LensKernel:
             self.technique, *densities))
 
 
-def lens_kernel(scene, colours, densities: bool, options: dict, kernel: str) -> tuple[LensKernel | None, str]:
+def lens_kernel(scene, colours, options: dict, kernel: str) -> tuple[LensKernel | None, str]:
     """(the kernel, "") if a bidirectional estimator with ``kernel`` ("fused" or "numpy") can join its light
-    vertices to the camera of ``scene`` through ``ext/lens_connect.c``, rendering with ``colours``, with or without
-    MIS ``densities`` and with the material ``options`` (``diffuse_sampling``); else (None, why not)."""
+    vertices to the camera of ``scene`` through ``ext/lens_connect.c``, rendering with ``colours`` and with the
+    material ``options`` (``diffuse_sampling``); else (None, why not)."""
     if kernel != "fused":
         return None, "kernel='numpy'"
     if colours is not RGBColours:
@@ -106,4 +105,4 @@ def lens_kernel(scene, colours, densities: bool, options: dict, kernel: str) -> 
     diffuse = np.array([type(m) is Diffuse for m in table.materials], dtype=bool)
     technique = DIFFUSE_SAMPLING.index(options.get("diffuse_sampling", "cosine"))
     return LensKernel(diffuse, material_rgb(table)[0], emitter_radiance(scene.lights),
-                      np.ascontiguousarray(scene.lights.area.two_sided), scene.camera, technique, densities), ""
+                      np.ascontiguousarray(scene.lights.area.two_sided), scene.camera, technique), ""

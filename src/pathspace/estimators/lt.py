@@ -12,10 +12,11 @@ depth by depth while they are walked, and their vertices are not kept
 
 Parameters: ``max_depth``, the roulette parameters, ``diffuse_sampling``
 and ``pyramid`` as for :mod:`pathspace.estimators.bdpt`; ``kernel``:
-"fused" (default) joins the vertices to a pinhole camera in one C pass
-where the scene allows (see :mod:`pathspace.estimators.lens_fused`),
-"numpy" always in the NumPy code, the reference (the same image bit for
-bit).
+"fused" (default) takes the subpaths' vertices and joins them to a pinhole
+camera in one C pass each where the scene allows (see
+:func:`pathspace.estimators.pt_fused.walk_vertex` and
+:mod:`pathspace.estimators.lens_fused`), "numpy" always in the NumPy code,
+the reference (the same image bit for bit).
 """
 from __future__ import annotations
 
@@ -26,7 +27,6 @@ import numpy as np
 
 from ..sampler import Sampler
 from ..spectra import RGBColours
-from . import parameters as p
 from .base import Counters
 from .bidirectional import Bidirectional
 from .connections import Batch, Contributions, lens_samples
@@ -42,8 +42,6 @@ __all__ = ["LightTracer"]
 class LightTracer(Bidirectional):
     """Light tracer; see the module docstring for the parameters."""
 
-    kernel: str = p.kernel("the joining of vertices to the camera")
-
     name = "lt"
     uses_camera_subpaths = False
     uses_lens_hits = False
@@ -52,14 +50,14 @@ class LightTracer(Bidirectional):
     def plan(self, scene) -> list[str]:
         """What this estimator will do on ``scene``, and what it leaves out and why."""
         depth = "unbounded" if self.max_depth < 0 else self.max_depth
-        lines = [f"light tracing, max_depth={depth}", self._roulette_plan()]
+        lines = [f"light tracing, max_depth={depth}", self._roulette_plan(), self._walk_plan(scene)]
         delta = scene.materials.delta_names
         if delta:
             lines.append(f"specular materials ({', '.join(delta)}): paths reaching the camera only through them "
                          "are not formed (those pixels miss that light)")
         if scene.lights.environment is not None:
             lines.append("environment seen directly: not formed (an infinite light cannot be joined to the camera)")
-        fused, reason = lens_kernel(scene, RGBColours, False, {"diffuse_sampling": self.diffuse_sampling}, self.kernel)
+        fused, reason = lens_kernel(scene, RGBColours, {"diffuse_sampling": self.diffuse_sampling}, self.kernel)
         lines.append("vertices joined to the camera in one C pass (the fused kernel) in RGB, in NumPy when spectral"
                      if fused is not None else f"vertices joined to the camera in NumPy ({reason})")
         return lines
@@ -91,8 +89,7 @@ class LightTracer(Bidirectional):
         return batch, state
 
     def _kernels(self, scene, settings) -> dict:
-        return {"lens_kernel": lens_kernel(scene, settings.colours, settings.densities, settings.options,
-                                           self.kernel)[0]}
+        return {"lens_kernel": lens_kernel(scene, settings.colours, settings.options, self.kernel)[0]}
 
     def _contributions(self, batch: Batch):
         if batch.made is not None:

@@ -64,6 +64,7 @@ from .bootstrap import BATCH, GROUPS, allocate, reservoir_draw
 from .control import Interrupted, RenderControl
 from .metropolis import (CHAINS, CONTRIBUTIONS, Proposal, Splatting, chain_statistics, contribution_function,
                          run_passes, step_groups, uniform_stream)
+from . import parameters as p
 from .parameters import or_none
 from .partition import UnexploredBDPT
 from . import path_mutations as mutations
@@ -228,6 +229,7 @@ class MLT(Estimator):
     explore: str = parameter("all", "which paths longer than direct the chains sample: 'all', or 'specular' (those "
                                     "with a specular vertex; BDPT renders the others each pass, one sample per "
                                     "pixel)", partial(choice, options=EXPLORE))
+    kernel: str = p.kernel("the vertices and connections of the BDPT that renders the paths the chains leave")
     lengths: Lengths = field(init=False, repr=False)
     direct_estimator: BDPT | None = field(init=False, repr=False)
 
@@ -243,9 +245,9 @@ class MLT(Estimator):
                              f"lengths direct + 1 .. max_depth), got {self.direct!r}")
         self.lengths = Lengths(self.max_depth, self.direct + 1)
         if self.explore == "specular":
-            self.direct_estimator = UnexploredBDPT(max_depth=self.max_depth, direct=self.direct)
+            self.direct_estimator = UnexploredBDPT(max_depth=self.max_depth, direct=self.direct, kernel=self.kernel)
         else:
-            self.direct_estimator = BDPT(max_depth=self.direct) if self.direct else None
+            self.direct_estimator = BDPT(max_depth=self.direct, kernel=self.kernel) if self.direct else None
 
     @property
     def weights(self) -> np.ndarray:

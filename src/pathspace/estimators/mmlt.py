@@ -87,11 +87,13 @@ class MMLT(Metropolis):
     mis: str = parameter("power", "MIS heuristic among a length's strategies: 'power', 'balance' or 'uniform'",
                          lambda value, name: choice(value, name, HEURISTICS))
     mis_beta: float = p.mis_beta()
+    kernel: str = p.kernel("BDPT's vertices and connections")
     inner: BDPT = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        self.inner = BDPT(max_depth=self.max_depth, rr="off", mis=self.mis, mis_beta=self.mis_beta)
+        self.inner = BDPT(max_depth=self.max_depth, rr="off", mis=self.mis, mis_beta=self.mis_beta,
+                          kernel=self.kernel)
 
     def plan(self, scene) -> list[str]:
         """The strategies the chains choose from, then the Metropolis settings."""

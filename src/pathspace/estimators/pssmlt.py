@@ -99,12 +99,14 @@ class PSSMLT(Metropolis):
                                     "draws, and each step waits for its longest path)", partial(integer, low=1))
     rr: str | None = p.underlying_rr()
     rr_depth: int | None = p.underlying_rr_depth()
+    kernel: str = p.kernel("the underlying estimator's vertices and connections")
     inner: object = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         super().__post_init__()
         given = {name: value for name, value in (("rr", self.rr), ("rr_depth", self.rr_depth)) if value is not None}
-        self.inner = (PathTracer if self.over == "pt" else BDPT)(max_depth=self.max_depth, **given)
+        self.inner = (PathTracer if self.over == "pt" else BDPT)(max_depth=self.max_depth, kernel=self.kernel,
+                                                                 **given)
 
     def plan(self, scene) -> list[str]:
         """What the chains explore, then the Metropolis settings."""

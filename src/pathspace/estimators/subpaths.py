@@ -47,6 +47,7 @@ from ..roulette import RussianRoulette
 from ..vecmath import dot, offset_origin
 from .base import Counters
 from .control import RenderControl
+from .pt_fused import walk_vertex
 from .walk import WALK_FIELDS, Arrival, Dimensions, Walk
 from .wavefront import Lanes, take_lanes
 
@@ -243,6 +244,7 @@ class SubpathSettings:
     counters: Counters
     control: RenderControl
     densities: bool = True  # whether to keep the densities MIS weights read (``rev``, and DENSITY_FIELDS)
+    kernel: str = "fused"   # where the walks' vertices are taken (see pathspace.estimators.pt_fused.walk_vertex)
 
 
 class _Recorder:
@@ -297,6 +299,9 @@ class _Growth:
                  record: dict, lanes: int) -> None:
         self.settings, self.walk, self.recorder, self.previous = settings, walk, recorder, record
         self.opposite = opposite  # the roulette of walks in the other direction (for the reverse densities)
+        # BSDF sample, roulette and reverse density in one C pass, where the scene allows
+        self.fused = walk_vertex(settings.scene, settings.colours, walk.roulette, settings.options, walk.dims,
+                                 walk.transport, settings.densities, settings.kernel)[0]
         self.terminated = np.zeros(lanes, bool)
         self.lens_hits: list[dict] | None = None   # light walks through a thin lens: rays that hit it
         self.escapes = False                       # camera walks with an environment: vertices at infinity
@@ -346,7 +351,8 @@ class _Growth:
                 g_prev = np.where(lanes.prev_infinite, 1.0, cos_at(lanes.prev_n, lanes.direction) / dist2)
             densities = dict(fwd=fwd, g_prev=g_prev, q=walk.mis_survival(arrival),
                              q_rev=walk.mis_survival(arrival, self.opposite))
-        u = walk.draw()
+        numbers = walk.numbers()
+        u = walk.dims.split(numbers)
         emitter = settings.scene.lights.area.emitter_of_triangle
         record = self.recorder.add(lanes.lane, index, SURFACE, p=arrival.p, n=arrival.normal, eps=arrival.eps,
                                    wo=-lanes.direction, beta=lanes.beta, material=arrival.material.astype(np.int64),
@@ -356,22 +362,40 @@ class _Growth:
             if settings.max_vertices >= SAFETY_VERTICES:
                 settings.counters.truncated += walk.size
             return False
-        materials = MaterialLanes(table, arrival.material, settings.colours.take(lanes.lane), settings.options)
-        sample = materials.sample(arrival.surface, u.bsdf, walk.transport)
+        if self.fused is not None:
+            alive, pdf_back = self._fused_scatter(arrival, numbers, densities.get("q"))
+        else:
+            materials = MaterialLanes(table, arrival.material, settings.colours.take(lanes.lane), settings.options)
+            sample = materials.sample(arrival.surface, u.bsdf, walk.transport)
+            if settings.densities:
+                pdf_back = np.where(sample.delta, 0.0,
+                                    reverse_pdf(materials, arrival.normal, sample.wi, -lanes.direction))
+            if sample.terminated is not None:
+                self.terminated[lanes.lane[sample.terminated]] = True
+            alive = walk.scatter(arrival, sample, u.roulette, walk.survival(arrival, sample), densities.get("q"))
         if settings.densities:
             # The previous vertex as the opposite walk would generate it from here (Veach 1997, eq. 10.7).
-            pdf_back = np.where(sample.delta, 0.0, reverse_pdf(materials, arrival.normal, sample.wi, -lanes.direction))
             pdf_back = pdf_back * densities["q_rev"]
             self.previous["rev"][np.searchsorted(self.previous["lane"], lanes.lane)] = pdf_back * g_prev
-        if sample.terminated is not None:
-            self.terminated[lanes.lane[sample.terminated]] = True
-        alive = walk.scatter(arrival, sample, u.roulette, walk.survival(arrival, sample), densities.get("q"))
-        if settings.densities:
             lanes.prev_n, lanes.prev_infinite = arrival.normal, np.zeros(walk.size, bool)
         self.previous = record
         if not alive.all():
             walk.keep(np.flatnonzero(alive))
         return True
+
+    def _fused_scatter(self, arrival: Arrival, numbers: np.ndarray, q: np.ndarray | None):
+        """The BSDF sample, roulette and next ray of :meth:`_vertex` in one C pass (``ext/pt_vertex.c``), bit for
+        bit: (which lanes go on, the reverse density of each direction sampled or None without densities); the
+        walk's lanes take their next state, and ``q`` as MIS sees it."""
+        lanes = self.walk.lanes
+        out = self.fused(arrival, lanes, numbers)
+        lanes.beta, lanes.origin, lanes.direction, lanes.pdf, lanes.delta = (out.beta, out.origin, out.direction,
+                                                                             out.pdf, out.delta)
+        if out.eta_scale is not None:
+            lanes.eta_scale = out.eta_scale
+        if "q" in lanes.fields:
+            lanes.q = q
+        return out.alive, out.pdf_back
 
     def _through_lens(self, t_hit: np.ndarray) -> None:
         """Note the rays that pass through a thin lens before hitting anything."""
@@ -404,8 +428,10 @@ def _walk_lanes(count: int, densities: bool, **state: np.ndarray) -> Lanes:
     for walks with ``densities``), and any extra fields."""
     fields = _WALK_FIELDS + (_DENSITY_WALK_FIELDS if densities else ())
     fields += tuple(f for f in state if f not in fields + _DENSITY_WALK_FIELDS)
+    if densities:
+        state = {**state, "q": np.ones(count)}
     return Lanes(fields, depth=np.zeros(count, np.int32), delta=np.zeros(count, bool), lane=np.arange(count),
-                 q=np.ones(count), **state)
+                 **state)
 
 
 def camera_subpaths(settings: SubpathSettings, pixels: np.ndarray, sampler, limit: np.ndarray | None = None) -> Subpaths:
@@ -431,6 +457,9 @@ def camera_subpaths(settings: SubpathSettings, pixels: np.ndarray, sampler, limi
     walk = Walk(scene, lanes, sampler, settings.camera_roulette, CAMERA_VERTEX)
     growth = _Growth(settings, walk, settings.light_roulette, recorder, record, count)
     growth.escapes = scene.lights.environment is not None
+    if growth.escapes and not settings.densities:
+        raise ValueError("camera_subpaths: vertices at infinity are recorded with their densities; walks without "
+                         "densities cannot record them")
     growth.limit = limit
     growth.run()
     settings.counters.rays += growth.walk.rays
@@ -503,10 +532,10 @@ def _light_walk(settings: SubpathSettings, count: int, sampler, recorder: _Recor
     with np.errstate(divide="ignore", invalid="ignore"):
         beta0 = np.where(e.pdf_pos > 0, 1.0 / e.pdf_pos, 0.0)
         beta = e.value * np.where(e.pdf_dir > 0, beta0 * e.cos_light / e.pdf_dir, 0.0)
+    origin_density = {"fwd": lights.pdf_le(e.entity, e.normal, e.direction)[0]} if settings.densities else {}
     record = recorder.add(np.arange(count), 0, LIGHT, p=e.point.astype(np.float32), n=e.normal, eps=e.epsilon,
-                          beta=np.repeat(beta0[None, :], colours.channels, axis=0),
-                          fwd=lights.pdf_le(e.entity, e.normal, e.direction)[0], entity=e.entity.astype(np.int64),
-                          infinite=e.infinite, u=u.connect)
+                          beta=np.repeat(beta0[None, :], colours.channels, axis=0), entity=e.entity.astype(np.int64),
+                          infinite=e.infinite, u=u.connect, **origin_density)
     # From a light at infinity the next vertex's density is the disk density, projected at the hit.
     pmf = lights.pmf("power").take(e.entity)
     with np.errstate(divide="ignore", invalid="ignore"):
@@ -520,6 +549,9 @@ def _light_walk(settings: SubpathSettings, count: int, sampler, recorder: _Recor
                         prev_n=e.normal, prev_infinite=e.infinite, **extra)
     walk = Walk(scene, lanes, sampler, settings.light_roulette, LIGHT_VERTEX, "importance")
     growth = _Growth(settings, walk, settings.camera_roulette, recorder, record, count)
+    if lens and not settings.densities:
+        raise ValueError("light_subpaths: rays through a thin lens are recorded with their densities; walks without "
+                         "densities cannot record them")
     growth.lens_hits = [] if lens else None
     growth.limit = limit
     growth.run()
