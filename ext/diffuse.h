@@ -47,4 +47,17 @@ static inline double ps_diffuse_eval(int technique, const float nf[3], const flo
     return cos_over_pi;
 }
 
+/* pathspace.estimators.subpaths.reverse_pdf: the density with which a diffuse surface of geometric normal n
+ * samples wo (toward its walk's previous vertex) when light arrives from `toward` (Surface.facing(n, -toward),
+ * then Diffuse.eval toward wo; Veach 1997, eq. 10.7). */
+static inline double ps_diffuse_reverse_pdf(int technique, const float n[3], const float toward[3],
+                                            const float wo[3])
+{
+    float away[3] = {-toward[0], -toward[1], -toward[2]}, nf[3];
+    ps_facing(n, away, nf);
+    double pdf;
+    ps_diffuse_eval(technique, nf, wo, &pdf);
+    return pdf;
+}
+
 #endif

@@ -93,16 +93,6 @@ static inline double cos_at(const float n[3], const float w[3])
     return n[0] != 0.0f || n[1] != 0.0f || n[2] != 0.0f ? (double)fabsf(ps_dot3(n, w)) : 1.0;
 }
 
-/* subpaths.reverse_pdf: the density with which the end's diffuse BSDF samples its predecessor (along wo) when
- * light arrives along `toward` (the direction from the end to the other end of the join). */
-static inline double reverse_pdf(int technique, const End *e, const float toward[3])
-{
-    float away[3] = {-toward[0], -toward[1], -toward[2]}, nf[3];
-    ps_facing(e->n, away, nf);
-    double pdf;
-    ps_diffuse_eval(technique, nf, e->wo, &pdf);
-    return pdf;
-}
 
 PyObject *ps_join_vertices(PyObject *module, PyObject *args)
 {
@@ -181,8 +171,9 @@ PyObject *ps_join_vertices(PyObject *module, PyObject *args)
         }
         qs_rev[j] = apart ? pdf_z * eye.q[l] * cos_at(y.n, w) / dist2 : 0.0;
         pt_rev[j] = apart ? pdf_y * light.q[i] * cos_at(z.n, w) / dist2 : 0.0;
-        qs_minus_rev[j] = reverse_pdf(technique, &y, w) * light.q_rev[i] * light.g_prev[i];
-        pt_minus_rev[j] = reverse_pdf(technique, &z, back) * eye.q_rev[l] * eye.g_prev[l];
+        /* each end sampling its predecessor, light arriving from the other end */
+        qs_minus_rev[j] = ps_diffuse_reverse_pdf(technique, y.n, w, y.wo) * light.q_rev[i] * light.g_prev[i];
+        pt_minus_rev[j] = ps_diffuse_reverse_pdf(technique, z.n, back, z.wo) * eye.q_rev[l] * eye.g_prev[l];
     }
     Py_END_ALLOW_THREADS
     if (bad >= 0) {

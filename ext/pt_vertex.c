@@ -293,16 +293,9 @@ static void scatter(const VertexArrays *va, const Options *o, int roulette, cons
         va->delta[i] = (npy_bool)s->delta;
         if (va->eta_out)
             va->eta_out[i] = eta_scale * s->eta * s->eta;
-        if (va->pdf_back) { /* subpaths.reverse_pdf: light arriving along the sample, toward where the walk came */
-            float away[3] = {-s->wi[0], -s->wi[1], -s->wi[2]}, nr[3], back[3];
-            for (int c = 0; c < 3; ++c)
-                back[c] = -va->direction[c * n + i];
-            double pdf_back = 0.0;
-            if (!s->delta) {
-                ps_facing(ng, away, nr);
-                ps_diffuse_eval(o->diffuse_technique, nr, back, &pdf_back);
-            }
-            va->pdf_back[i] = pdf_back;
+        if (va->pdf_back) { /* light arriving along the sample, toward where the walk came from */
+            float back[3] = {-va->direction[i], -va->direction[n + i], -va->direction[2 * n + i]};
+            va->pdf_back[i] = s->delta ? 0.0 : ps_diffuse_reverse_pdf(o->diffuse_technique, ng, s->wi, back);
         }
     }
 }

@@ -46,6 +46,60 @@ def same_bits(a: np.ndarray, b: np.ndarray, what: str = "") -> None:
     np.testing.assert_array_equal(a, b, err_msg=what)
 
 
+def extreme(rng: np.random.Generator, n: int, rows: int | None = None, share: float = 0.01) -> np.ndarray:
+    """n positive numbers (or rows of them) over 300 decades, a ``share`` each of them zero, negative zero,
+    infinite or NaN."""
+    x = 10.0 ** rng.uniform(-150, 150, n if rows is None else (rows, n))
+    for value in (0.0, -0.0, np.inf, np.nan):
+        x[..., rng.random(n) < share] = value
+    return x
+
+
+def extreme_normals_and_directions(rng: np.random.Generator, n: int) -> tuple[np.ndarray, np.ndarray]:
+    """(unit normals, unit directions back) (3, n) float64 of made-up vertices: seen from both sides and edge-on,
+    some directions NaN, some normals zero (no cosine factor) or NaN."""
+    normal = rng.normal(size=(3, n))
+    normal /= np.linalg.norm(normal, axis=0)
+    wo = rng.normal(size=(3, n))
+    wo /= np.linalg.norm(wo, axis=0)
+    edge = rng.random(n) < 0.03
+    wo[:, edge] = np.cross(normal.T, rng.normal(size=(n, 3))).T[:, edge]   # edge-on (cos ~ 0)
+    wo[:, edge] /= np.linalg.norm(wo[:, edge], axis=0)
+    wo[:, rng.random(n) < 0.01] = np.nan
+    normal[:, rng.random(n) < 0.02] = 0.0                                   # no normal: cos_at is 1
+    normal[:, rng.random(n) < 0.01] = np.nan
+    return normal, wo
+
+
+def extreme_arrivals(mesh, rng: np.random.Generator, n: int):
+    """(triangles, barycentrics b1, b2, directions (3, n) float32) of n rays arriving on random triangles of
+    ``mesh`` (about as many of each material): from both sides, at grazing angles, some along NaN directions."""
+    prim = balanced_triangles(mesh, rng, n)
+    b1, b2 = rng.random(n), rng.random(n)
+    flip = b1 + b2 > 1
+    b1[flip], b2[flip] = 1 - b1[flip], 1 - b2[flip]
+    b1, b2 = b1.astype(np.float32), b2.astype(np.float32)
+    _, normal, _ = mesh.hit_geometry(prim, b1, b2)
+    tangent = np.cross(normal.T, rng.normal(size=(n, 3))).T
+    tangent /= np.linalg.norm(tangent, axis=0)
+    height = np.where(rng.random(n) < 0.3, 10.0 ** rng.uniform(-9, -2, n), rng.uniform(0.0, 1.0, n))
+    side = np.where(rng.random(n) < 0.5, 1.0, -1.0)
+    direction = -(side * height * normal + np.sqrt(1 - height ** 2) * tangent)   # toward the surface
+    direction = (direction / np.linalg.norm(direction, axis=0)).astype(np.float32)
+    direction[:, rng.random(n) < 0.01] = np.nan
+    return prim, b1, b2, direction
+
+
+def sky_quad_scene() -> ps.Scene:
+    """A grey quad under a uniform sky (an environment light), seen by a pinhole camera at 8x8."""
+    return ps.scene_from_dict({
+        "camera": {"position": [0, 0, 5], "look_at": [0, 0, 0], "fov": 30, "resolution": [8, 8]},
+        "materials": {"grey": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
+        "shapes": [{"type": "quad", "corner": [-1, -1, 0], "edge_u": [2, 0, 0], "edge_v": [0, 2, 0],
+                    "material": "grey"}],
+        "lights": [{"type": "environment", "radiance": [1, 1, 1]}]})
+
+
 def balanced_triangles(mesh, rng: np.random.Generator, n: int) -> np.ndarray:
     """n random triangles (int32) of ``mesh``, about as many of each of its materials (a scene's spheres have far
     more triangles than its walls)."""

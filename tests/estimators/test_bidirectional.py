@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import pathspace as ps
-from conftest import agree, no_nonfinite, scene_dict
+from conftest import agree, no_nonfinite, scene_dict, sky_quad_scene
 
 
 def scene(name: str, resolution=(32, 32), **camera) -> ps.Scene:
@@ -38,12 +38,7 @@ def test_infeasible_strategies_contribute_nothing():
     """(1, 1) cannot join a camera point to a light at infinity: with only an environment its image is
     exactly zero while BDPT still agrees with path tracing.  (t = 0 with a pinhole and s = 0 with point
     lights are never even formed; their zero weights are tested on the MIS kernel, tests/test_mis.py.)"""
-    env = ps.scene_from_dict({
-        "camera": {"position": [0, 0, 5], "look_at": [0, 0, 0], "fov": 30, "resolution": [8, 8]},
-        "materials": {"grey": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
-        "shapes": [{"type": "quad", "corner": [-1, -1, 0], "edge_u": [2, 0, 0], "edge_v": [0, 2, 0],
-                    "material": "grey"}],
-        "lights": [{"type": "environment", "radiance": [1, 1, 1]}]})
+    env = sky_quad_scene()
     assert not ps.render(env, "bdpt", spp=16, seed=1, mis="single", strategy=(1, 1)).image.any()
     assert ps.render(env, "bdpt", spp=16, seed=1, mis="single", strategy=(0, 2)).image.any()
     both = ps.render(env, "bdpt", spp=64, seed=2)

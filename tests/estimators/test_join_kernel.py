@@ -27,7 +27,7 @@ from pathspace.estimators.join_fused import join_kernel
 from pathspace.estimators.subpaths import FIELDS, SURFACE, Subpaths
 from pathspace.sampler import ReplaySampler
 from pathspace.spectra import RGBColours, SpectralColours
-from conftest import count_lanes, same_bits
+from conftest import count_lanes, extreme, extreme_normals_and_directions, same_bits
 from conftest import repository_scene as scene
 
 DENSITIES = ("qs_fwd", "qs_rev", "qs_minus_rev", "pt_fwd", "pt_rev", "pt_minus_rev")
@@ -103,14 +103,6 @@ def test_fused_chosen_strategies_equal_numpy(kernel_calls):
 
 # -- joins of made-up vertex pairs ---------------------------------------------------------------------------
 
-def extreme(rng: np.random.Generator, n: int, rows: int | None = None) -> np.ndarray:
-    """n positive numbers (or rows of them) over 300 decades, some zero, negative zero, infinite or NaN."""
-    x = 10.0 ** rng.uniform(-150, 150, n if rows is None else (rows, n))
-    for value in (0.0, -0.0, np.inf, np.nan):
-        x[..., rng.random(n) < 0.01] = value
-    return x
-
-
 def made_up_side(sc, rng: np.random.Generator, n: int, connect: int, points: np.ndarray | None = None) -> Subpaths:
     """n one-vertex subpaths of diffuse surface vertices inside the scene's bounds (at ``points`` where given):
     seen from both sides and edge-on, some with zero or NaN normals or NaN directions back or positions; extreme
@@ -118,16 +110,7 @@ def made_up_side(sc, rng: np.random.Generator, n: int, connect: int, points: np.
     low, high = sc.mesh.vertices.min(axis=0), sc.mesh.vertices.max(axis=0)
     p = rng.uniform(low, high, (n, 3)).T if points is None else points.copy()
     p[:, rng.random(n) < 0.005] = np.nan
-    normal = rng.normal(size=(3, n))
-    normal /= np.linalg.norm(normal, axis=0)
-    wo = rng.normal(size=(3, n))
-    wo /= np.linalg.norm(wo, axis=0)
-    edge = rng.random(n) < 0.03
-    wo[:, edge] = np.cross(normal.T, rng.normal(size=(n, 3))).T[:, edge]   # edge-on (cos ~ 0)
-    wo[:, edge] /= np.linalg.norm(wo[:, edge], axis=0)
-    wo[:, rng.random(n) < 0.01] = np.nan
-    normal[:, rng.random(n) < 0.02] = 0.0                                   # no normal: cos_at is 1
-    normal[:, rng.random(n) < 0.01] = np.nan
+    normal, wo = extreme_normals_and_directions(rng, n)
     diffuse = np.flatnonzero([type(m) is Diffuse for m in sc.materials.materials])
     fields = dict.fromkeys(FIELDS)
     fields.update(lane=np.arange(n), index=rng.integers(1, 6, n), p=p.astype(np.float32),

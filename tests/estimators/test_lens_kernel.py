@@ -24,7 +24,7 @@ from pathspace.estimators.lens_fused import lens_kernel
 from pathspace.estimators.lt import LightTracer
 from pathspace.estimators.subpaths import FIELDS, LIGHT, SURFACE, Subpaths
 from pathspace.spectra import RGBColours, SpectralColours
-from conftest import count_lanes, same_bits
+from conftest import count_lanes, extreme, extreme_normals_and_directions, same_bits
 from conftest import repository_scene as scene
 
 
@@ -69,14 +69,6 @@ def test_fused_light_tracing_equals_numpy_through_glass(name, kernel_calls):
 
 # -- connections of made-up subpaths ------------------------------------------------------------------------
 
-def extreme(rng: np.random.Generator, n: int) -> np.ndarray:
-    """n positive numbers over 300 decades, some zero, negative zero, infinite or NaN."""
-    x = 10.0 ** rng.uniform(-150, 150, n)
-    for value in (0.0, -0.0, np.inf, np.nan):
-        x[rng.random(n) < 0.01] = value
-    return x
-
-
 def made_up_subpaths(sc, rng: np.random.Generator, n: int = 8000) -> Subpaths:
     """n one-vertex-per-lane subpaths of vertices in front of the camera: on surfaces (diffuse, mirror, glass;
     seen from both sides and edge-on) and on the lights (facing the camera or not), some right at the pinhole,
@@ -89,19 +81,8 @@ def made_up_subpaths(sc, rng: np.random.Generator, n: int = 8000) -> Subpaths:
     p = (camera.position[:, None] + camera.forward[:, None] * depth + camera.right[:, None] * across[0]
          + camera.image_up[:, None] * across[1])
     p[:, rng.random(n) < 0.03] = camera.position[:, None]                              # at the pinhole
-    normal = rng.normal(size=(3, n))
-    normal /= np.linalg.norm(normal, axis=0)
-    wo = rng.normal(size=(3, n))
-    wo /= np.linalg.norm(wo, axis=0)
-    edge = rng.random(n) < 0.03
-    wo[:, edge] = np.cross(normal.T, rng.normal(size=(n, 3))).T[:, edge]             # edge-on (cos ~ 0)
-    wo[:, edge] /= np.linalg.norm(wo[:, edge], axis=0)
-    wo[:, rng.random(n) < 0.01] = np.nan
-    normal[:, rng.random(n) < 0.02] = 0.0                                              # no normal: cos_at is 1
-    normal[:, rng.random(n) < 0.01] = np.nan
-    beta = 10.0 ** rng.uniform(-150, 150, (3, n))
-    for value in (0.0, -0.0, np.inf, np.nan):
-        beta[:, rng.random(n) < 0.01] = value
+    normal, wo = extreme_normals_and_directions(rng, n)
+    beta = extreme(rng, n, 3)
     densities = {name: extreme(rng, n) for name in ("fwd", "rev", "g_prev", "q", "q_rev")}
     on_light = rng.random(n) < 0.3
     kind = np.where(on_light & (rng.random(n) < 0.5), LIGHT, SURFACE).astype(np.int8)

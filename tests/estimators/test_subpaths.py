@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import pathspace as ps
-from conftest import CORNELL
+from conftest import CORNELL, sky_quad_scene
 from pathspace.estimators.base import Counters
 from pathspace.estimators.bidirectional import STREAMS, Bidirectional
 from pathspace.estimators.control import RenderControl
@@ -155,12 +155,7 @@ def test_walks_without_densities_cannot_record_lens_hits_or_vertices_at_infinity
     from pathspace.spectra import RGBColours
 
     thin_lens = ps.load_scene(CORNELL.parent.parent / "cornell-box-thin-lens" / "scene.toml", resolution=(8, 8))
-    environment = ps.scene_from_dict({
-        "camera": {"position": [0, 0, 5], "look_at": [0, 0, 0], "fov": 30, "resolution": [8, 8]},
-        "materials": {"grey": {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5]}},
-        "shapes": [{"type": "quad", "corner": [-1, -1, 0], "edge_u": [2, 0, 0], "edge_v": [0, 2, 0],
-                    "material": "grey"}],
-        "lights": [{"type": "environment", "radiance": [1, 1, 1]}]})
+    environment = sky_quad_scene()
     roulette = RussianRoulette("albedo", 1)
     for sc, walk in ((thin_lens, lambda settings, sampler: light_subpaths(settings, 4, sampler, True)),
                      (environment, lambda settings, sampler: camera_subpaths(settings, np.arange(4), sampler))):

@@ -27,7 +27,7 @@ from pathspace.estimators.walk import Dimensions, Walk
 from pathspace.roulette import TRAPPED_DEPTH, RussianRoulette
 from pathspace.sampler import ReplaySampler
 from pathspace.spectra import RGBColours, SpectralColours
-from conftest import balanced_triangles, count_lanes, same_bits
+from conftest import count_lanes, extreme, extreme_arrivals, same_bits
 from conftest import repository_scene as scene
 
 
@@ -82,27 +82,13 @@ def extreme_growth(sc, kernel: str, transport: str, densities: bool, roulette: R
     infinite; depths from 1 to past the trapped depth (or all below rr_depth unless ``deep``); the uniforms of its
     next vertex, some 0, just below 1 or 1.  Returns (the growth, the arrival)."""
     rng = np.random.default_rng(seed)
-    mesh = sc.mesh
-    prim = balanced_triangles(mesh, rng, n)
-    b1, b2 = rng.random(n), rng.random(n)
-    flip = b1 + b2 > 1
-    b1[flip], b2[flip] = 1 - b1[flip], 1 - b2[flip]
-    b1, b2 = b1.astype(np.float32), b2.astype(np.float32)
-    _, normal, _ = mesh.hit_geometry(prim, b1, b2)
-    tangent = np.cross(normal.T, rng.normal(size=(n, 3))).T
-    tangent /= np.linalg.norm(tangent, axis=0)
-    height = np.where(rng.random(n) < 0.3, 10.0 ** rng.uniform(-9, -2, n), rng.uniform(0.0, 1.0, n))
-    side = np.where(rng.random(n) < 0.5, 1.0, -1.0)
-    direction = -(side * height * normal + np.sqrt(1 - height ** 2) * tangent)   # toward the surface
-    direction = (direction / np.linalg.norm(direction, axis=0)).astype(np.float32)
-    direction[:, rng.random(n) < 0.01] = np.nan
+    prim, b1, b2, direction = extreme_arrivals(sc.mesh, rng, n)
+    normal = sc.mesh.hit_geometry(prim, b1, b2)[1]
     dims = CAMERA_VERTEX if transport == "radiance" else LIGHT_VERTEX
     u = rng.random((n, dims.size))
     for value in (0.0, np.nextafter(1.0, 0.0), 1.0):
         u[rng.random((n, dims.size)) < 0.02] = value
-    beta = 10.0 ** rng.uniform(-150, 150, (3, n))
-    for value in (0.0, -0.0, np.inf, np.nan):
-        beta[:, rng.random(n) < 0.02] = value
+    beta = extreme(rng, n, 3, share=0.02)
     scale = 10.0 ** rng.uniform(-3, 3, n)
     scale[rng.random(n) < 0.02], scale[rng.random(n) < 0.02] = 0.0, np.inf
     depth = rng.integers(1, TRAPPED_DEPTH + 40, n) if deep else rng.integers(1, roulette.start_depth, n)

@@ -24,9 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _native
-from ..bsdfs import DIFFUSE_SAMPLING, Diffuse
 from ..spectra import RGBColours
-from .pt_fused import material_rgb, unserved_material
+from .pt_fused import diffuse_tables, unserved
 
 __all__ = ["JoinKernel", "JoinResult", "join_kernel"]
 
@@ -66,16 +65,9 @@ def join_kernel(scene, colours, densities: bool, options: dict, kernel: str) -> 
     """(the kernel, "") if a bidirectional estimator with ``kernel`` ("fused" or "numpy") can join its light and
     camera vertices on ``scene`` through ``ext/join.c``, rendering with ``colours``, with or without MIS
     ``densities`` and with the material ``options`` (``diffuse_sampling``); else (None, why not)."""
-    if kernel != "fused":
-        return None, "kernel='numpy'"
-    if colours is not RGBColours:
-        return None, "spectral rendering"
-    if not densities:
-        return None, "connections without MIS densities"
-    table = scene.materials
-    reason = unserved_material(table)
+    reason = unserved(scene, colours is RGBColours, kernel)
     if reason:
         return None, reason
-    diffuse = np.array([type(m) is Diffuse for m in table.materials], dtype=bool)
-    technique = DIFFUSE_SAMPLING.index(options.get("diffuse_sampling", "cosine"))
-    return JoinKernel(diffuse, material_rgb(table)[0], technique), ""
+    if not densities:
+        return None, "connections without MIS densities"
+    return JoinKernel(*diffuse_tables(scene.materials, options)), ""

@@ -30,11 +30,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import _native
-from ..bsdfs import DIFFUSE_SAMPLING, Diffuse
 from ..camera import PinholeCamera
 from ..lights import AreaLight
 from ..spectra import RGBColours
-from .pt_fused import emitter_radiance, material_rgb, unserved_material
+from .pt_fused import diffuse_tables, emitter_radiance, unserved
 
 __all__ = ["LensJoin", "LensKernel", "lens_kernel"]
 
@@ -90,19 +89,13 @@ def lens_kernel(scene, colours, options: dict, kernel: str) -> tuple[LensKernel 
     """(the kernel, "") if a bidirectional estimator with ``kernel`` ("fused" or "numpy") can join its light
     vertices to the camera of ``scene`` through ``ext/lens_connect.c``, rendering with ``colours`` and with the
     material ``options`` (``diffuse_sampling``); else (None, why not)."""
-    if kernel != "fused":
-        return None, "kernel='numpy'"
-    if colours is not RGBColours:
-        return None, "spectral rendering"
+    reason = unserved(scene, colours is RGBColours, kernel)
+    if reason:
+        return None, reason
     if type(scene.camera) is not PinholeCamera:
         return None, "a camera other than a pinhole"
     if scene.lights.models != [AreaLight]:
         return None, "lights other than area lights"
-    table = scene.materials
-    reason = unserved_material(table)
-    if reason:
-        return None, reason
-    diffuse = np.array([type(m) is Diffuse for m in table.materials], dtype=bool)
-    technique = DIFFUSE_SAMPLING.index(options.get("diffuse_sampling", "cosine"))
-    return LensKernel(diffuse, material_rgb(table)[0], emitter_radiance(scene.lights),
+    diffuse, reflectance, technique = diffuse_tables(scene.materials, options)
+    return LensKernel(diffuse, reflectance, emitter_radiance(scene.lights),
                       np.ascontiguousarray(scene.lights.area.two_sided), scene.camera, technique), ""

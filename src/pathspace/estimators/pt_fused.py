@@ -32,8 +32,8 @@ from ..roulette import POLICIES, TRAPPED_DEPTH
 from ..spectra import RGBColours, RGBMode
 from ..warp import azimuth
 
-__all__ = ["MODELS", "FusedVertex", "VertexResult", "emitter_radiance", "fused_vertex", "material_rgb",
-           "unserved_material", "walk_vertex"]
+__all__ = ["MODELS", "FusedVertex", "VertexResult", "diffuse_tables", "emitter_radiance", "fused_vertex",
+           "material_rgb", "unserved", "walk_vertex"]
 
 # The material models the kernel implements (these classes, not subclasses), by the numbers ext/pt_vertex.c
 # gives their kinds.
@@ -105,14 +105,10 @@ def fused_vertex(tracer, scene, mode, strategy: str, heuristic: int) -> tuple[Fu
     """(the fused vertex, "") if ``tracer`` (a PathTracer) can take its vertices on ``scene`` in ``mode``
     through ``ext/pt_vertex.c``, with the light ``strategy`` in use and light samples weighted by
     ``heuristic`` (``pt.MIS_CODES``; -1 without light samples); else (None, why not)."""
-    if tracer.kernel != "fused":
-        return None, "kernel='numpy'"
-    if not isinstance(mode, RGBMode):
-        return None, "spectral rendering"
-    table = scene.materials
-    reason = unserved_material(table)
+    reason = unserved(scene, isinstance(mode, RGBMode), tracer.kernel)
     if reason:
         return None, reason
+    table = scene.materials
     if strategy == "mixture":
         return None, "light_sampling='mixture'"
     if tracer.dimensions(mode)[1].sizes != VERTEX_LAYOUT:
@@ -139,19 +135,15 @@ def walk_vertex(scene, colours, roulette, options: dict, dims, transport: str, d
     ``options`` (``diffuse_sampling``), drawing ``dims`` (a :class:`~pathspace.estimators.walk.Dimensions` with
     the BSDF's 3 numbers and the roulette's 1 in a row), transporting ``transport`` ("radiance" from the camera,
     "importance" from the lights), with or without the reverse ``densities``; else (None, why not)."""
-    if kernel != "fused":
-        return None, "kernel='numpy'"
-    if colours is not RGBColours:
-        return None, "spectral rendering"
-    table = scene.materials
-    reason = unserved_material(table)
+    reason = unserved(scene, colours is RGBColours, kernel)
     if reason:
         return None, reason
-    names = list(dims.sizes)
-    bsdf_row = int(sum(dims.sizes[name] for name in names[:names.index("bsdf")]))
-    if dims.sizes["bsdf"] != 3 or names[names.index("bsdf") + 1:][:1] != ["roulette"] or dims.sizes["roulette"] != 1:
+    names, sizes = list(dims.sizes), dims.sizes
+    bsdf = names.index("bsdf")
+    if names[bsdf + 1:bsdf + 2] != ["roulette"] or (sizes["bsdf"], sizes["roulette"]) != (3, 1):
         return None, "the vertex's numbers are laid out differently"
-    materials, needs_azimuth = _materials(table)
+    bsdf_row = sum(sizes[name] for name in names[:bsdf])
+    materials, needs_azimuth = _materials(scene.materials)
     walk = (bsdf_row, int(transport == "importance"), int(densities))
     return FusedVertex(materials, (None,) * 6, needs_azimuth,
                        _options(options.get("diffuse_sampling", "cosine"), -1, roulette, 2.0), walk), ""
@@ -175,12 +167,26 @@ def _options(technique: str, heuristic: int, roulette, exponent: float) -> tuple
             float(roulette.cap))
 
 
-def unserved_material(table) -> str:
-    """Why the fused kernels cannot render the materials of ``table`` (a MaterialTable), or "" if they can."""
-    for name, material in zip(table.names, table.materials):
+def unserved(scene, rgb: bool, kernel: str) -> str:
+    """Why the fused kernels cannot take a render of ``scene`` in RGB (``rgb``) or spectrally with ``kernel``
+    ("fused" or "numpy"), for what they all need: the kernel chosen, RGB, and materials of :data:`MODELS`; or ""
+    if they can."""
+    if kernel != "fused":
+        return "kernel='numpy'"
+    if not rgb:
+        return "spectral rendering"
+    for name, material in zip(scene.materials.names, scene.materials.materials):
         if type(material) not in MODELS:
             return f"material {name!r} is {material.kind}"
     return ""
+
+
+def diffuse_tables(table, options: dict) -> tuple[np.ndarray, np.ndarray, int]:
+    """What the kernels that evaluate only the diffuse model read of ``table`` (a MaterialTable of
+    :data:`MODELS`): which materials are diffuse (M,) bool, the reflectances (3, M), and the index in
+    DIFFUSE_SAMPLING of the technique the material ``options`` choose (``diffuse_sampling``)."""
+    diffuse = np.array([type(m) is Diffuse for m in table.materials], dtype=bool)
+    return diffuse, material_rgb(table)[0], DIFFUSE_SAMPLING.index(options.get("diffuse_sampling", "cosine"))
 
 
 def material_rgb(table) -> tuple[np.ndarray, np.ndarray]:
