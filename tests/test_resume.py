@@ -8,6 +8,7 @@ import re
 import signal
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -16,6 +17,7 @@ import pytest
 
 import pathspace as ps
 from pathspace import resume
+from pathspace.estimators import make_estimator
 from pathspace.imageio import read_exr
 from pathspace.resume import StateError, load_state, read_header
 from pathspace.sampler import StreamSamplers
@@ -159,33 +161,63 @@ def interrupt(checkpoint) -> None:
     os.kill(os.getpid(), signal.SIGINT)
 
 
+class CtrlCAt:
+    """An estimator whose render is stopped by Ctrl-C at its checkpoint of ``passes`` passes, exactly: its
+    workers see no items from that pass on, finish those they have, and wait for the checkpoint to press
+    Ctrl-C (:meth:`interrupt`).  Without the hold, workers that ran ahead of a main thread starved of the GIL
+    could finish the render before it reached the checkpoint (CI saw a render that should have stopped
+    complete)."""
+
+    def __init__(self, name: str, params: dict, passes: int) -> None:
+        self.estimator, self.passes, self.pressed = make_estimator(name, **params), passes, threading.Event()
+        self.estimator.render_items = self._render_items
+
+    def _render_items(self, job, next_item, counters):
+        def held():
+            item = next_item()
+            return None if item is not None and item.passes[0] >= self.passes else item
+
+        yield from type(self.estimator).render_items(self.estimator, job, held, counters)
+        assert self.pressed.wait(60), f"the checkpoint at {self.passes} passes never came"
+        job.control.check()  # raises Interrupted, as a worker that asks for an item after the stop does
+
+    def interrupt(self, checkpoint) -> None:
+        """The checkpoint callback: Ctrl-C, then the held workers go on."""
+        interrupt(checkpoint)
+        self.pressed.set()
+
+
 @pytest.mark.parametrize("estimator, spp, params", [("pt", 200, {"max_depth": 3}), ("bdpt", 60, {"pyramid": 2}),
                                                     ("pt", 200, {"max_depth": 3, "spectral": True})])
 def test_stopped_twice_and_resumed_in_process(small, estimator, spp, params, tmp_path):
-    """Stopped at 4 passes or a little later, resumed, stopped again, resumed to the end: the same film as
-    one render; checkpoints count the passes of the whole render across sessions."""
+    """Stopped at 4 passes, resumed, stopped again a pass later, resumed to the end: the same film as one
+    render; checkpoints count the passes of the whole render across sessions."""
     state = tmp_path / "run.state"
-    whole = ps.render(small, estimator, spp=spp, seed=3, **params)
+    params = dict(params)
+    spectral = {"spectral": params.pop("spectral")} if "spectral" in params else {}
+    whole = ps.render(small, estimator, spp=spp, seed=3, **params, **spectral)
     handler = signal.getsignal(signal.SIGINT)   # Python's own, or SIG_IGN in a process started in the background
-    first = ps.render(small, estimator, spp=spp, seed=3, state_file=state, stop_on_signal=True, checkpoints=[4],
-                      on_checkpoint=interrupt, **params)
-    assert first.stats["stopped"] == "SIGINT" and 4 <= first.stats["spp"] < spp - 2
-    assert first.stats["saves"] == 1 and read_header(state)["passes"] == first.stats["spp"]
+    stop = CtrlCAt(estimator, params, 4)
+    first = ps.render(small, stop.estimator, spp=spp, seed=3, state_file=state, stop_on_signal=True,
+                      checkpoints=[4], on_checkpoint=stop.interrupt, **spectral)
+    assert first.stats["stopped"] == "SIGINT" and first.stats["spp"] == 4
+    assert first.stats["saves"] == 1 and read_header(state)["passes"] == 4
     assert signal.getsignal(signal.SIGINT) is handler  # restored
-    again = first.stats["spp"] + 1
-    second = ps.render(small, estimator, spp=spp, seed=3, state_file=state, resume=True, stop_on_signal=True,
-                       checkpoints=[again], on_checkpoint=interrupt, **params)
-    assert second.stats["stopped"] == "SIGINT" and again <= second.stats["spp"] < spp
+    stop = CtrlCAt(estimator, params, 5)
+    second = ps.render(small, stop.estimator, spp=spp, seed=3, state_file=state, resume=True, stop_on_signal=True,
+                       checkpoints=[5], on_checkpoint=stop.interrupt, **spectral)
+    assert second.stats["stopped"] == "SIGINT" and second.stats["spp"] == 5
     assert second.stats["resumed"]["passes"] == first.stats["spp"]
     assert second.stats["seconds"] > second.stats["resumed"]["seconds"] > 0
     seen = {}
     look = second.stats["spp"] + 1
     third = ps.render(small, estimator, spp=spp, seed=3, state_file=state, resume=True, checkpoints=[4, look],
-                      on_checkpoint=lambda c: seen.update({c.passes: c.film.mean().copy()}), **params)
+                      on_checkpoint=lambda c: seen.update({c.passes: c.film.mean().copy()}), **params, **spectral)
     assert third.stats["stopped"] is None and third.stats["resumed"]["passes"] == second.stats["spp"]
     assert_same_film(third.film, whole.film)
     assert list(seen) == [look]  # the checkpoint at 4 passes was behind the restored render
-    np.testing.assert_array_equal(seen[look], ps.render(small, estimator, spp=look, seed=3, **params).film.mean())
+    np.testing.assert_array_equal(seen[look], ps.render(small, estimator, spp=look, seed=3, **params,
+                                                        **spectral).film.mean())
     assert not state.exists()
 
 
@@ -206,11 +238,11 @@ def test_time_budgets_continue_with_the_time_left(small, tmp_path):
 
 
 def stop_early(scene, state) -> None:
-    """Save the state of a 200-pass render of ``scene`` stopped by Ctrl-C after 2 passes (short paths: the
-    first work item ends long before the last)."""
-    result = ps.render(scene, "pt", spp=200, seed=3, max_depth=3, state_file=state, stop_on_signal=True,
-                       checkpoints=[2], on_checkpoint=interrupt)
-    assert result.stats["stopped"] == "SIGINT" and state.exists()
+    """Save the state of a 200-pass render of ``scene`` stopped by Ctrl-C after 2 passes."""
+    stop = CtrlCAt("pt", {"max_depth": 3}, 2)
+    result = ps.render(scene, stop.estimator, spp=200, seed=3, state_file=state, stop_on_signal=True,
+                       checkpoints=[2], on_checkpoint=stop.interrupt)
+    assert result.stats["stopped"] == "SIGINT" and result.stats["spp"] == 2 and state.exists()
 
 
 def test_a_state_belongs_to_one_render(small, tmp_path):
