@@ -15,7 +15,9 @@ Per scene (the diffuse Cornell box and its glass-and-mirror variant, 256x256):
    the diffuse box and <= 0.3x on the specular one; lt <= 1.5x pt on the diffuse box).
 On the diffuse box:
 3. thread scaling: samples per second on every core over one thread, per estimator (goal >= 1.85 on
-   2 cores);
+   2 cores), beside the machine's ceiling for it: as many one-thread renders as cores, in processes of
+   their own, at once, over one alone (no GIL between them; on a machine whose cores slow each other
+   down, this is below the core count);
 4. where the time goes, one thread: the share of the render's CPU time spent in ray queries
    (``Accel.intersect`` / ``occluded`` / ``occluded_between``: Embree, the C packing of rays into its
    packets and the shadow rays built in C; goal >= 40% for pt), and the largest NumPy costs (cProfile of
@@ -32,6 +34,7 @@ import argparse
 import cProfile
 import pstats
 import statistics
+import subprocess
 import sys
 import tempfile
 import threading
@@ -140,21 +143,44 @@ def time_to_target(scene_name: str, args) -> None:
             print(f"  time to relMSE {TARGET:g}, {name}: {spread(values)} (min / median / max)")
 
 
-def thread_scaling(scene: ps.Scene, args) -> None:
-    """Figure 3: samples per second on every core over one thread."""
+# A one-thread render in a process of its own, for the machine's ceiling of thread scaling: prints samples/s.
+SOLO = """
+import sys
+import pathspace as ps
+scene, estimator, spp, seed = ps.load_scene(sys.argv[1]), sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+ps.render(scene, estimator, spp=1, seed=0, threads=1)
+print(ps.render(scene, estimator, spp=spp, seed=seed, threads=1).stats["samples_per_second"])
+"""
+
+
+def solo_rates(scene_file: Path, estimator: str, spp: int, seed: int, processes: int) -> list[float]:
+    """Samples per second of ``processes`` one-thread renders run at once, each in a process of its own."""
+    runs = [subprocess.Popen([sys.executable, "-c", SOLO, str(scene_file), estimator, str(spp), str(seed + k)],
+                             stdout=subprocess.PIPE, text=True) for k in range(processes)]
+    return [float(run.communicate()[0]) for run in runs]
+
+
+def thread_scaling(scene_file: Path, args) -> None:
+    """Figure 3: samples per second on every core over one thread; and the machine's ceiling for it: as many
+    one-thread renders as cores, each in its own process (no GIL, nothing shared but the machine), at once,
+    over one such render alone."""
+    scene = ps.load_scene(scene_file)
     cores = args.threads or ps.default_thread_count()
-    print(f"\nThread scaling on {cores} cores ({scene.camera.pixel_count} pixels, {args.scaling_spp} spp):")
+    print(f"\nThread scaling on {cores} cores ({scene.camera.pixel_count} pixels, {args.scaling_spp} spp), and "
+          f"{cores} one-thread processes at once over one alone (the machine's ceiling):")
     for estimator in ESTIMATORS:
         ps.render(scene, estimator, spp=1, seed=0, threads=cores)
-        factors = []
+        factors, ceilings = [], []
         for repeat in range(args.repeats):
             rate = {}
             for threads in (1, cores):
                 result = ps.render(scene, estimator, spp=args.scaling_spp, seed=repeat, threads=threads)
                 rate[threads] = result.stats["samples_per_second"]
             factors.append(rate[cores] / rate[1])
-        print(f"  {estimator:4s}: {spread(factors)} (last run {rate[1] / 1e3:.0f} k -> {rate[cores] / 1e3:.0f} k "
-              f"samples/s)")
+            alone = solo_rates(scene_file, estimator, args.scaling_spp, repeat, 1)[0]
+            ceilings.append(sum(solo_rates(scene_file, estimator, args.scaling_spp, repeat, cores)) / alone)
+        print(f"  {estimator:4s}: threads {spread(factors)}, processes {spread(ceilings)} (last run "
+              f"{rate[1] / 1e3:.0f} k -> {rate[cores] / 1e3:.0f} k samples/s)")
 
 
 class QueryClock:
@@ -261,9 +287,10 @@ def main(argv=None) -> None:
     if "target" in parts:
         for name in args.scenes.split(","):
             time_to_target(name, args)
-    box = ps.load_scene(ROOT / "scenes" / "cornell-box" / "scene.toml")
+    box_file = ROOT / "scenes" / "cornell-box" / "scene.toml"
+    box = ps.load_scene(box_file)
     if "scaling" in parts:
-        thread_scaling(box, args)
+        thread_scaling(box_file, args)
     if "shares" in parts:
         time_shares(box, args)
     if "memory" in parts:

@@ -68,3 +68,17 @@ def test_every_estimator_takes_the_same_parameters_with_the_same_messages(estima
                             ({"diffuse_sampling": "sideways"}, "diffuse_sampling: expected one of")):
         with pytest.raises(ValueError, match=message):
             make(estimator, **params)
+
+
+@pytest.mark.parametrize("policy", POLICIES)
+def test_survival_left_out_of_the_mis_densities_samples_the_same(policy):
+    """in_mis=False changes what MIS sees (q = 1), never the walk's own survival probabilities."""
+    albedo, depth = np.array([0.2, 0.9, 1.0, 0.5]), np.array([1, 2, 3, 7])
+    throughput = np.array([[0.3, 0.8, 1.2, 0.05]] * 3)
+    kept, left = RussianRoulette(policy, 2, 0.3, 0.9), RussianRoulette(policy, 2, 0.3, 0.9, in_mis=False)
+    assert kept.describe() == left.describe()
+    sampled = kept.survival(depth, throughput, albedo)
+    np.testing.assert_array_equal(left.survival(depth, throughput, albedo), sampled)
+    np.testing.assert_array_equal(left.mis_survival(albedo), np.ones(4))
+    expected = {"off": np.ones(4), "fixed": np.full(4, 0.7), "albedo": albedo, "throughput": np.ones(4)}[policy]
+    np.testing.assert_array_equal(kept.mis_survival(albedo), expected)

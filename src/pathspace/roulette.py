@@ -53,7 +53,11 @@ the light).  "throughput" depends on the walk that reached the vertex, which
 the opposite walk cannot know; bidirectional estimators then leave q out of
 the MIS densities.  In both cases the weights stay a partition of unity over
 the strategies, so the estimate is unbiased; they are the exact heuristic of
-the true densities when ``rr_depth`` is 1 and the policy is local.
+the true densities when ``rr_depth`` is 1 and the policy is local.  A walk's
+local q may also be left out of the densities on purpose (``in_mis`` False;
+BDPT's ``mis_roulette``): any densities that are one function of the path
+per strategy keep the estimate unbiased, and which give the lower variance
+is an empirical question (docs/performance.md).
 """
 from __future__ import annotations
 
@@ -81,6 +85,7 @@ class RussianRoulette:
     start_depth: int = 5
     probability: float = 0.5
     cap: float = 1.0
+    in_mis: bool = True  # a local policy's q enters the vertex densities MIS compares (see mis_survival)
 
     def __post_init__(self) -> None:
         choice(self.policy, "rr", POLICIES)
@@ -106,6 +111,11 @@ class RussianRoulette:
     def mis_survival(self, albedo: np.ndarray) -> np.ndarray:
         """q as multiple importance sampling puts it in the vertex densities, at vertices of materials with
         ``albedo`` (N,): a local policy's survival past ``rr_depth``, whatever the depth; 1 for
+        "throughput" and "off", and for any policy that is not ``in_mis``."""
+        return self._local_survival(albedo) if self.in_mis else np.ones(albedo.shape)
+
+    def _local_survival(self, albedo: np.ndarray) -> np.ndarray:
+        """A local policy's survival past ``rr_depth`` at vertices of materials with ``albedo`` (N,); 1 for
         "throughput" and "off"."""
         if self.policy == "fixed":
             return np.full(albedo.shape, 1.0 - self.probability)
@@ -129,7 +139,7 @@ class RussianRoulette:
         if self.policy == "off" or depth.max(initial=0) < self.start_depth:
             return None
         if self.local:
-            q = self.mis_survival(albedo)
+            q = self._local_survival(albedo)
         else:
             q = np.clip(throughput.max(axis=0), 0.0, self.cap)
             if specular is not None:

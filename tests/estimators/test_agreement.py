@@ -85,8 +85,11 @@ CONFIGS: dict[str, Config] = {
     "lt-rr-fixed": Config("lt", {"rr": "fixed", "rr_probability": 0.1}),
     "lt-rr-throughput": Config("lt", {"rr": "throughput"}),
     "lt-rr-albedo-depth-3": Config("lt", {"rr": "albedo", "rr_depth": 3}),
-    # BDPT: defaults (power heuristic, albedo roulette from depth 1), the other heuristics, the roulette policies.
+    # BDPT: defaults (power heuristic, albedo roulette from depth 1 with the camera subpaths' survival in the MIS
+    # densities), the other heuristics, the other choices of survival in the densities, the roulette policies.
     "bdpt": Config("bdpt"),
+    "bdpt-mis-roulette-both": Config("bdpt", {"mis_roulette": "both"}),
+    "bdpt-mis-roulette-light": Config("bdpt", {"mis_roulette": "light", "rr": "fixed", "rr_probability": 0.1}),
     "bdpt-balance": Config("bdpt", {"mis": "balance"}),
     "bdpt-uniform": Config("bdpt", {"mis": "uniform"}, 512),
     "bdpt-rr-off": Config("bdpt", {"rr": "off"}),

@@ -146,3 +146,25 @@ def test_parameter_errors():
         ps.estimators.make_estimator("bdpt", max_depth=0)
     with pytest.raises(ValueError, match=r"longer than max_depth=2"):
         ps.estimators.make_estimator("bdpt", mis="single", strategy=(2, 2), max_depth=2)
+
+
+@pytest.mark.parametrize("mis_roulette", ["both", "light", "none"])
+def test_survival_in_the_mis_densities_changes_the_weights_only(mis_roulette):
+    """Which subpaths' roulette enters the MIS densities changes the weights, not the paths: the same rays and
+    bit for bit the same unweighted strategy images; the weighted ones differ where both subpaths take part."""
+    box = scene("cornell-box", (16, 16))
+    default = ps.render(box, "bdpt", spp=4, seed=3, pyramid=3)
+    other = ps.render(box, "bdpt", spp=4, seed=3, pyramid=3, mis_roulette=mis_roulette)
+    assert default.stats["rays"] == other.stats["rays"] and default.stats["params"]["mis_roulette"] == "camera"
+    names = [name for name in default.film.layers if name.endswith(".unweighted")]
+    assert len(names) >= 6
+    for name in names:
+        np.testing.assert_array_equal(other.film.layer_mean(name), default.film.layer_mean(name))
+    moved = [name for name in default.film.layers if name.endswith(".weighted")
+             and not np.array_equal(other.film.layer_mean(name), default.film.layer_mean(name))]
+    # paths of one segment (s0t2, s1t1) meet no roulette; paths of three segments do
+    assert {"s0t2.weighted", "s1t1.weighted", "s2t2.weighted"} <= set(default.film.layers)
+    assert "s2t2.weighted" in moved and "s0t2.weighted" not in moved and "s1t1.weighted" not in moved
+    line = {"both": "the camera and light subpaths' survival", "light": "the light subpaths' survival",
+            "none": "no survival probabilities"}[mis_roulette]
+    assert line in other.stats["plan"][1] and "the camera subpaths' survival" in default.stats["plan"][1]

@@ -41,8 +41,9 @@ def subpaths(name, **params):
     return scene, bdpt, batch
 
 
-def walk_densities(scene, sub, roulette):
-    """(fwd, rev) of every surface vertex whose neighbours are surface vertices, recomputed."""
+def walk_densities(scene, sub, roulette, opposite=None):
+    """(fwd, rev) of every surface vertex whose neighbours are surface vertices, recomputed with the survival
+    ``roulette(vertices)`` of this walk and ``opposite(vertices)`` of the opposite one (default: the same)."""
     rows = []
     for i in range(sub.count):
         lane, index = sub.lane[i], sub.index[i]
@@ -75,16 +76,19 @@ def walk_densities(scene, sub, roulette):
         dist2 = (d * d).sum(0)
         return pdf_sa * np.abs((sub.n[:, to] * d).sum(0)) / np.sqrt(dist2) / dist2
 
-    q = roulette(here)
-    fwd = area(pdf(here, nxt, prev) * q, here, nxt)      # the walk went prev -> here -> nxt
-    rev = area(pdf(here, prev, nxt) * q, here, prev)     # the opposite walk: nxt -> here -> prev
+    fwd = area(pdf(here, nxt, prev) * roulette(here), here, nxt)                # the walk: prev -> here -> nxt
+    rev = area(pdf(here, prev, nxt) * (opposite or roulette)(here), here, prev)  # the opposite: nxt -> here -> prev
     return nxt, fwd, prev, rev
 
 
 @pytest.mark.parametrize("params, local", [({"rr": "albedo"}, True), ({"rr": "fixed", "rr_probability": 0.3}, True),
                                            ({"rr": "albedo", "rr_depth": 3}, True),
-                                           ({"rr": "throughput"}, False), ({"rr": "off"}, True)])
+                                           ({"rr": "throughput"}, False), ({"rr": "off"}, True),
+                                           ({"rr": "albedo", "mis_roulette": "none"}, False)])
 def test_recorded_densities_are_the_sampled_ones(params, local):
+    """The vertex densities the walks record are those they sampled with, roulette included where the MIS
+    densities hold it (mis_roulette "both"; "none": no walk's); recomputed from the vertices."""
+    params = {"mis_roulette": "both", **params}
     scene, bdpt, batch = subpaths("cornell-box", **params)
     for sub in (batch.eye, batch.light):
         def roulette(v):
@@ -98,6 +102,21 @@ def test_recorded_densities_are_the_sampled_ones(params, local):
         np.testing.assert_allclose(sub.fwd[nxt], fwd, rtol=2e-3)
         np.testing.assert_allclose(sub.rev[prev], rev, rtol=2e-3)
         np.testing.assert_array_equal(sub.q[nxt - 1], roulette(nxt - 1))
+
+
+def test_recorded_densities_leave_out_the_light_walks_roulette_by_default():
+    """BDPT's default (mis_roulette "camera"): the camera walk's survival in the densities either walk records
+    for it, the light walk's in none."""
+    scene, bdpt, batch = subpaths("cornell-box")
+    assert bdpt.mis_roulette == "camera"
+    albedo = lambda sub: lambda v: scene.materials.albedo[sub.material[v]]  # noqa: E731
+    ones = lambda v: np.ones(v.size)  # noqa: E731
+    for sub, mine, theirs in ((batch.eye, albedo(batch.eye), ones), (batch.light, ones, albedo(batch.light))):
+        nxt, fwd, prev, rev = walk_densities(scene, sub, mine, theirs)
+        assert nxt.size > 100
+        np.testing.assert_allclose(sub.fwd[nxt], fwd, rtol=2e-3)
+        np.testing.assert_allclose(sub.rev[prev], rev, rtol=2e-3)
+        np.testing.assert_array_equal(sub.q[nxt - 1], mine(nxt - 1))
 
 
 def test_an_emptied_wavefront_keeps_its_dtypes_through_split_and_extend():

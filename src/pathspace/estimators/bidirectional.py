@@ -93,10 +93,15 @@ class Bidirectional(Estimator):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        self.roulette = RussianRoulette(self.rr, self.rr_depth, self.rr_probability, self.rr_cap)
+        camera_in_mis, light_in_mis = self._roulette_in_mis()
+        self.roulette = RussianRoulette(self.rr, self.rr_depth, self.rr_probability, self.rr_cap, camera_in_mis)
         self.light_roulette = RussianRoulette(*(own if own is not None else camera for own, camera in (
             (self.light_rr, self.rr), (self.light_rr_depth, self.rr_depth),
-            (self.light_rr_probability, self.rr_probability), (self.light_rr_cap, self.rr_cap))))
+            (self.light_rr_probability, self.rr_probability), (self.light_rr_cap, self.rr_cap))), light_in_mis)
+
+    def _roulette_in_mis(self) -> tuple[bool, bool]:
+        """Whether the camera and the light subpaths' local roulette enter the vertex densities (both here)."""
+        return True, True
 
     def _walk_plan(self, scene) -> str:
         """Where the subpaths' vertices (BSDF sample, roulette) are taken on ``scene``."""
@@ -106,15 +111,21 @@ class Bidirectional(Estimator):
                 else f"subpath vertices in NumPy ({reason})")
 
     def _roulette_plan(self) -> str:
-        if self.roulette == self.light_roulette or not self.uses_camera_subpaths:
-            return f"{self.light_roulette.describe()} on the subpaths (local policies: in the vertex densities)"
+        if not self.uses_densities:
+            return f"{self.light_roulette.describe()} on the subpaths"
+        walks = [name for name, roulette in (("camera", self.roulette), ("light", self.light_roulette))
+                 if roulette.in_mis and roulette.local and roulette.policy != "off"]
+        densities = (f"in the vertex densities MIS compares: the {' and '.join(walks)} subpaths' survival" if walks
+                     else "no survival probabilities in the vertex densities MIS compares")
+        if self.roulette.describe() == self.light_roulette.describe():
+            return f"{self.light_roulette.describe()} on the subpaths ({densities})"
         return (f"camera subpaths: {self.roulette.describe()}; light subpaths: {self.light_roulette.describe()} "
-                "(local policies: in the vertex densities)")
+                f"({densities})")
 
     def warnings(self, scene) -> list[str]:
         """Roulette settings with infinite variance on ``scene``."""
         found = roulette_warnings(self.light_roulette, scene.materials, self.max_depth)
-        if self.uses_camera_subpaths and self.roulette != self.light_roulette:
+        if self.uses_camera_subpaths and self.roulette.describe() != self.light_roulette.describe():
             found = roulette_warnings(self.roulette, scene.materials, self.max_depth) + found
         return found
 

@@ -17,8 +17,9 @@ from .base import parameter
 
 __all__ = ["max_depth", "roulette_policy", "roulette_depth", "roulette_probability", "roulette_cap", "light_rr",
            "light_rr_depth", "light_rr_probability", "light_rr_cap",
-           "mis_heuristic", "mis_beta", "mis_strategy", "mis_strategies", "diffuse_sampling", "light_selection",
-           "light_measure", "pyramid", "underlying_rr", "underlying_rr_depth", "or_none", "KERNELS", "kernel"]
+           "mis_heuristic", "mis_beta", "mis_roulette", "MIS_ROULETTE", "mis_strategy", "mis_strategies",
+           "diffuse_sampling", "light_selection", "light_measure", "pyramid", "underlying_rr", "underlying_rr_depth",
+           "or_none", "KERNELS", "kernel"]
 
 KERNELS = ("fused", "numpy")
 
@@ -80,6 +81,16 @@ def light_rr_cap():
     """The light subpaths' ``rr_cap``; None: ``rr_cap``."""
     return parameter(None, "rr_cap of light subpaths (default: rr_cap)",
                      or_none(partial(number, low=0.0, high=1.0, low_open=True, what="a survival cap in (0, 1]")))
+
+
+MIS_ROULETTE = ("both", "camera", "light", "none")
+
+
+def mis_roulette(default: str = "camera"):
+    """Which subpaths' local roulette enters the vertex densities MIS compares."""
+    return parameter(default, "which subpaths' local Russian roulette (survival probability) enters the vertex "
+                              "densities MIS compares: 'both', 'camera' (the light subpaths' is left out), 'light' or "
+                              "'none'; any choice is unbiased", partial(choice, options=MIS_ROULETTE))
 
 
 def underlying_rr():
