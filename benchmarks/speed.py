@@ -143,21 +143,39 @@ def time_to_target(scene_name: str, args) -> None:
             print(f"  time to relMSE {TARGET:g}, {name}: {spread(values)} (min / median / max)")
 
 
-# A one-thread render in a process of its own, for the machine's ceiling of thread scaling: prints samples/s.
+# A one-thread render in a process of its own, for the machine's ceiling of thread scaling: once the scene and
+# its BVH are built and a warm-up pass is rendered, it says "ready" and waits for a line on stdin before it
+# renders, so that the renders of several such processes run at the same time; then it prints samples/s.
 SOLO = """
 import sys
 import pathspace as ps
 scene, estimator, spp, seed = ps.load_scene(sys.argv[1]), sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
 ps.render(scene, estimator, spp=1, seed=0, threads=1)
-print(ps.render(scene, estimator, spp=spp, seed=seed, threads=1).stats["samples_per_second"])
+print("ready", flush=True)
+sys.stdin.readline()
+print(ps.render(scene, estimator, spp=spp, seed=seed, threads=1).stats["samples_per_second"], flush=True)
 """
 
 
 def solo_rates(scene_file: Path, estimator: str, spp: int, seed: int, processes: int) -> list[float]:
-    """Samples per second of ``processes`` one-thread renders run at once, each in a process of its own."""
+    """Samples per second of ``processes`` one-thread renders run at once, each in a process of its own (all set
+    up and warmed up before any starts)."""
     runs = [subprocess.Popen([sys.executable, "-c", SOLO, str(scene_file), estimator, str(spp), str(seed + k)],
-                             stdout=subprocess.PIPE, text=True) for k in range(processes)]
-    return [float(run.communicate()[0]) for run in runs]
+                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True) for k in range(processes)]
+    for run in runs:
+        if run.stdout.readline().strip() != "ready":
+            raise RuntimeError(f"a one-thread render of {estimator} failed before it started (exit code "
+                               f"{run.wait()})")
+    for run in runs:
+        run.stdin.write("go\n")
+        run.stdin.flush()
+    rates = []
+    for run in runs:
+        out, _ = run.communicate()
+        if run.returncode != 0:
+            raise RuntimeError(f"a one-thread render of {estimator} failed (exit code {run.returncode})")
+        rates.append(float(out))
+    return rates
 
 
 def thread_scaling(scene_file: Path, args) -> None:

@@ -82,3 +82,5 @@ def test_survival_left_out_of_the_mis_densities_samples_the_same(policy):
     np.testing.assert_array_equal(left.mis_survival(albedo), np.ones(4))
     expected = {"off": np.ones(4), "fixed": np.full(4, 0.7), "albedo": albedo, "throughput": np.ones(4)}[policy]
     np.testing.assert_array_equal(kept.mis_survival(albedo), expected)
+    assert kept.samples_like(left) and left.samples_like(kept) and kept != left
+    assert not kept.samples_like(RussianRoulette(policy, 2, 0.3 + 1e-9, 0.9, in_mis=False))  # beyond describe()'s

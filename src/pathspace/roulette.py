@@ -43,8 +43,9 @@ the estimate stays unbiased for any q in (0, 1].  Policies (``rr``):
 
 "off", "fixed" and "albedo" are *local*: past ``rr_depth``, q depends only on
 the vertex's material, the same whichever direction a walk passes the
-vertex, so bidirectional estimators include it in the vertex densities that
-their MIS weights compare (as SmallVCM does; :meth:`RussianRoulette.mis_survival`).
+vertex, so bidirectional estimators can include it in the vertex densities
+that their MIS weights compare (as SmallVCM does; :meth:`RussianRoulette.mis_survival`;
+BDPT's default includes the camera subpaths' only, see ``in_mis`` below).
 Those densities must be one function of the path for every strategy -- or
 the weights of a path no longer sum to one and the image is biased -- so
 they take q at every vertex, also where a walk had not yet reached
@@ -53,7 +54,8 @@ the light).  "throughput" depends on the walk that reached the vertex, which
 the opposite walk cannot know; bidirectional estimators then leave q out of
 the MIS densities.  In both cases the weights stay a partition of unity over
 the strategies, so the estimate is unbiased; they are the exact heuristic of
-the true densities when ``rr_depth`` is 1 and the policy is local.  A walk's
+the true densities when ``rr_depth`` is 1, the policy is local and both walks'
+q are in the densities.  A walk's
 local q may also be left out of the densities on purpose (``in_mis`` False;
 BDPT's ``mis_roulette``): any densities that are one function of the path
 per strategy keep the estimate unbiased, and which give the lower variance
@@ -61,7 +63,7 @@ is an empirical question (docs/performance.md).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -98,6 +100,10 @@ class RussianRoulette:
     def local(self) -> bool:
         """Whether q depends only on the vertex (its material and depth), not on the walk that reached it."""
         return self.policy != "throughput"
+
+    def samples_like(self, other: "RussianRoulette") -> bool:
+        """Whether ``other`` terminates walks as this policy does (whatever either puts in the MIS densities)."""
+        return replace(self, in_mis=other.in_mis) == other
 
     def describe(self) -> str:
         """The policy in words."""

@@ -90,6 +90,7 @@ CONFIGS: dict[str, Config] = {
     "bdpt": Config("bdpt"),
     "bdpt-mis-roulette-both": Config("bdpt", {"mis_roulette": "both"}),
     "bdpt-mis-roulette-light": Config("bdpt", {"mis_roulette": "light", "rr": "fixed", "rr_probability": 0.1}),
+    "bdpt-mis-roulette-none": Config("bdpt", {"mis_roulette": "none"}),
     "bdpt-balance": Config("bdpt", {"mis": "balance"}),
     "bdpt-uniform": Config("bdpt", {"mis": "uniform"}, 512),
     "bdpt-rr-off": Config("bdpt", {"rr": "off"}),

@@ -35,8 +35,9 @@ mis_roulette : "camera" (default), "both", "light" or "none"
     vertex densities the MIS weights compare.  Every choice is unbiased and
     samples the same paths.  The default leaves the light subpaths' out: 10%
     lower error at the same samples than "both" (SmallVCM's choice) on the
-    diffuse Cornell box, 4-16% lower on most other scenes in ``scenes/``, the
-    same on some, 5-7% higher on the white furnace (docs/performance.md).
+    diffuse Cornell box, 5-16% lower on six of the eleven other scenes in
+    ``scenes/``, the same on three, 5-7% higher on the white furnace
+    (docs/performance.md).  PSSMLT over BDPT and MLT's BDPT part take it too.
 diffuse_sampling : "cosine" (default) or "uniform"
 pyramid : int, default 0
     Record, for every path length up to this many segments and every

@@ -117,7 +117,7 @@ class Bidirectional(Estimator):
                  if roulette.in_mis and roulette.local and roulette.policy != "off"]
         densities = (f"in the vertex densities MIS compares: the {' and '.join(walks)} subpaths' survival" if walks
                      else "no survival probabilities in the vertex densities MIS compares")
-        if self.roulette.describe() == self.light_roulette.describe():
+        if self.roulette.samples_like(self.light_roulette):
             return f"{self.light_roulette.describe()} on the subpaths ({densities})"
         return (f"camera subpaths: {self.roulette.describe()}; light subpaths: {self.light_roulette.describe()} "
                 f"({densities})")
@@ -125,7 +125,7 @@ class Bidirectional(Estimator):
     def warnings(self, scene) -> list[str]:
         """Roulette settings with infinite variance on ``scene``."""
         found = roulette_warnings(self.light_roulette, scene.materials, self.max_depth)
-        if self.uses_camera_subpaths and self.roulette.describe() != self.light_roulette.describe():
+        if self.uses_camera_subpaths and not self.roulette.samples_like(self.light_roulette):
             found = roulette_warnings(self.roulette, scene.materials, self.max_depth) + found
         return found
 
