@@ -72,8 +72,9 @@ def extreme_normals_and_directions(rng: np.random.Generator, n: int) -> tuple[np
 
 
 def extreme_arrivals(mesh, rng: np.random.Generator, n: int):
-    """(triangles, barycentrics b1, b2, directions (3, n) float32) of n rays arriving on random triangles of
-    ``mesh`` (about as many of each material): from both sides, at grazing angles, some along NaN directions."""
+    """(triangles, barycentrics b1, b2, geometric normals, directions (3, n) float32) of n rays arriving on random
+    triangles of ``mesh`` (about as many of each material): from both sides, at grazing angles, some along NaN
+    directions."""
     prim = balanced_triangles(mesh, rng, n)
     b1, b2 = rng.random(n), rng.random(n)
     flip = b1 + b2 > 1
@@ -87,7 +88,7 @@ def extreme_arrivals(mesh, rng: np.random.Generator, n: int):
     direction = -(side * height * normal + np.sqrt(1 - height ** 2) * tangent)   # toward the surface
     direction = (direction / np.linalg.norm(direction, axis=0)).astype(np.float32)
     direction[:, rng.random(n) < 0.01] = np.nan
-    return prim, b1, b2, direction
+    return prim, b1, b2, normal, direction
 
 
 def sky_quad_scene() -> ps.Scene:

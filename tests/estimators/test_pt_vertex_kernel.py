@@ -94,7 +94,7 @@ def extreme_walk(sc, tracer: PathTracer, seed: int, n: int = 6000, deep: bool = 
     depth (or all below ``rr_depth`` unless ``deep``); and the uniforms of its next vertex, some 0, just
     below 1 or 1."""
     rng = np.random.default_rng(seed)
-    prim, b1, b2, direction = extreme_arrivals(sc.mesh, rng, n)
+    prim, b1, b2, _, direction = extreme_arrivals(sc.mesh, rng, n)
     u = rng.random((n, 7))
     for value in (0.0, np.nextafter(1.0, 0.0), 1.0):
         u[rng.random((n, 7)) < 0.02] = value

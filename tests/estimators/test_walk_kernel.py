@@ -82,8 +82,7 @@ def extreme_growth(sc, kernel: str, transport: str, densities: bool, roulette: R
     infinite; depths from 1 to past the trapped depth (or all below rr_depth unless ``deep``); the uniforms of its
     next vertex, some 0, just below 1 or 1.  Returns (the growth, the arrival)."""
     rng = np.random.default_rng(seed)
-    prim, b1, b2, direction = extreme_arrivals(sc.mesh, rng, n)
-    normal = sc.mesh.hit_geometry(prim, b1, b2)[1]
+    prim, b1, b2, normal, direction = extreme_arrivals(sc.mesh, rng, n)
     dims = CAMERA_VERTEX if transport == "radiance" else LIGHT_VERTEX
     u = rng.random((n, dims.size))
     for value in (0.0, np.nextafter(1.0, 0.0), 1.0):

@@ -16,11 +16,11 @@ they are generated from when the policy is *local* (a property of the
 material and depth at the vertex, not of the walk: the same in both
 directions, as in SmallVCM) and the walk that would generate them puts it in
 the MIS densities (``RussianRoulette.in_mis``; BDPT's ``mis_roulette``), so
-that the reverse densities can be stored once; see :mod:`pathspace.roulette`.  Densities at points at infinity (the
-environment) are in solid angle; the density of a vertex generated from
-infinity is the density on the disk the rays start from, projected (times
-|cos| at the vertex).  Delta (specular) vertices carry density 0 toward
-their neighbours.
+that the reverse densities can be stored once; see :mod:`pathspace.roulette`.
+Densities at points at infinity (the environment) are in solid angle; the
+density of a vertex generated from infinity is the density on the disk the
+rays start from, projected (times |cos| at the vertex).  Delta (specular)
+vertices carry density 0 toward their neighbours.
 
 Vertices of all lanes are stored flat, lane after lane, with CSR offsets, so
 that connections gather any (lane, vertex) pair in one array operation
