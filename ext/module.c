@@ -123,6 +123,10 @@ static PyMethodDef module_methods[] = {
      "moments_add(count, exponent, scaled_mean, scaled_m2, start, values)\n--\n\n(n,) float64, each column's "
      "largest |value|: one sample (values (C, n)) added to the moments of pixels start .. start + n - 1, columns "
      "with a NaN or Inf left out (see ext/film.c and pathspace.film.Moments)."},
+    {"splat_add", ps_splat_add, METH_VARARGS,
+     "splat_add(buffer, pixels, values)\n--\n\nbuffer[c, pixels[i]] += values[c, i] for every splat in order "
+     "(np.add.at per channel, bit for bit) with the GIL released; buffer (C, P) float64, pixels (n,) int64, values "
+     "(C, n) float64 (see ext/film.c)."},
     {"default_thread_count", default_thread_count, METH_NOARGS,
      "default_thread_count()\n--\n\nNumber of cores this process may run on."},
     {NULL, NULL, 0, NULL},

@@ -121,8 +121,9 @@ PyObject *ps_take_lanes(PyObject *module, PyObject *args);
 /* Cosine-weighted directions about unit normals (warp.c). */
 PyObject *ps_cosine_about(PyObject *module, PyObject *args);
 
-/* One sample added to a run of pixels' film moments (film.c). */
+/* One sample added to a run of pixels' film moments; splats added to a pass's buffer (film.c). */
 PyObject *ps_moments_add(PyObject *module, PyObject *args);
+PyObject *ps_splat_add(PyObject *module, PyObject *args);
 
 /* Shadow rays between surface points, returned (shadow.c; Accel.occluded_between traces them). */
 PyObject *ps_shadow_rays(PyObject *module, PyObject *args, PyObject *kwargs);

@@ -157,3 +157,66 @@ def test_moments_add_refuses_read_only_state():
     arrays[3].flags.writeable = False
     with pytest.raises(ValueError, match="scaled_m2 must be writeable"):
         _native.moments_add(*arrays, 0, np.ones((3, 4)))
+
+
+def test_splat_add_equals_np_add_at():
+    """Splats of a pass (many on the same pixels, over 600 decades, NaN and Inf among them) land in the
+    buffer as np.add.at per channel puts them, bit for bit: the same additions in the same order."""
+    rng = np.random.default_rng(11)
+    for channels in (1, 3, 4):
+        buffer = samples(rng, channels, 500, bad=False)
+        reference = buffer.copy()
+        for bad in (False, True):
+            pixels = rng.integers(0, 40, 5000)   # ~125 splats per pixel: their order matters
+            values = samples(rng, channels, pixels.size, bad)
+            if bad:   # a column range of a wider array: rows strided
+                values = np.concatenate([values, np.ones((channels, 3))], axis=1)[:, :pixels.size]
+            _native.splat_add(buffer, pixels, values)
+            with np.errstate(over="ignore", invalid="ignore"):
+                for c in range(channels):
+                    np.add.at(reference[c], pixels, values[c])
+            np.testing.assert_array_equal(buffer, reference)
+    assert np.isnan(buffer).any() and np.isfinite(buffer).any()
+
+
+def test_film_splats_of_any_layout():
+    """Transposed, misaligned and float32 values and int32 pixels reach the kernel as copies: the film's pass
+    is the one the same splats as float64 and int64 C arrays give."""
+    rng = np.random.default_rng(12)
+    pixels = rng.integers(0, 600, 2000)
+    values = rng.random((2000, 3)).astype(np.float32).astype(np.float64)   # float32 holds them exactly
+    raw = np.zeros(values.size * 8 + 1, np.uint8)
+    misaligned = np.frombuffer(raw.data, np.float64, values.size, 1).reshape(3, 2000)
+    misaligned[...] = values.T
+    layouts = [(pixels, np.ascontiguousarray(values.T)), (pixels, values.T), (pixels.astype(np.int32), misaligned),
+               (pixels, values.T.astype(np.float32))]
+    films = [Film(30, 20, 3) for _ in layouts]
+    for film, (p, v) in zip(films, layouts):
+        film.add_splats(0, p, v)
+        film.add_samples(0, 0, np.zeros((3, 600)))
+    for film in films[1:]:
+        assert_same(film.moments, films[0].moments)
+    assert films[0].moments.count.sum() == 600 and (films[0].moments.scaled_mean > 0).any()
+
+
+@pytest.mark.parametrize("buffer, pixels, values, error, match", [
+    (np.zeros((3, 10), np.float32), np.zeros(2, np.int64), np.ones((3, 2)), TypeError, "buffer"),
+    (np.zeros((3, 10)), np.zeros(2, np.int32), np.ones((3, 2)), TypeError, "pixels"),
+    (np.zeros((3, 10)), np.zeros(2, np.int64), np.ones((3, 2), np.float32), TypeError, "values"),
+    (np.zeros((3, 10)), np.zeros(2, np.int64), np.ones((2, 2)), ValueError, r"expected \(3, 2\)"),
+    (np.zeros((3, 10)), np.zeros(3, np.int64), np.ones((3, 2)), ValueError, r"expected \(3, 3\)"),
+    (np.zeros((3, 10)), np.array([0, 10]), np.ones((3, 2)), IndexError, "pixel 10 of splat 1 is outside the film"),
+    (np.zeros((3, 10)), np.array([-1, 0]), np.ones((3, 2)), IndexError, "pixel -1 of splat 0"),
+])
+def test_splat_add_refuses_bad_arguments(buffer, pixels, values, error, match):
+    before = buffer.copy()
+    with pytest.raises(error, match=match):
+        _native.splat_add(buffer, pixels, values)
+    np.testing.assert_array_equal(buffer, before)   # nothing added before the refusal
+
+
+def test_splat_add_refuses_a_read_only_buffer():
+    buffer = np.zeros((3, 10))
+    buffer.flags.writeable = False
+    with pytest.raises(ValueError, match="buffer must be writeable"):
+        _native.splat_add(buffer, np.zeros(1, np.int64), np.ones((3, 1)))

@@ -16,8 +16,9 @@ A pass is complete -- and its samples join the moments -- when every pixel
 has received its ``add_samples``; a pass's splats must therefore be added
 before the last of its samples.  An open pass holds one dense buffer (its
 splats, then its samples added to them) and one per layer it has received;
-splats are scattered into it where they land (``np.add.at``), so no work
-item ever allocates an image.  Samples of passes that never complete (a
+splats are scattered into it where they land (``np.add.at`` per channel, in
+one C pass with the GIL released: ``ext/film.c``), so no work item ever
+allocates an image.  Samples of passes that never complete (a
 render stopped in the middle of one) are never part of the estimate
 (:meth:`discard_incomplete`).  Named *layers* (BDPT's per-strategy images)
 receive splats only; each completed pass adds one sample to every layer (a
@@ -76,7 +77,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ._native import moments_add
+from ._native import moments_add, splat_add
 
 __all__ = ["Film", "Moments"]
 
@@ -320,9 +321,8 @@ class Film:
     def _scatter(self, pass_index: int, layer: str | None, pixels: np.ndarray, values: np.ndarray) -> None:
         if pass_index not in self._open:
             self._open[pass_index] = _Pass(self.channels, self.pixel_count)
-        buffer = self._open[pass_index].buffer(layer)
-        for c in range(self.channels):
-            np.add.at(buffer[c], pixels, values[c])
+        splat_add(self._open[pass_index].buffer(layer), np.require(pixels, np.int64, "CA"),
+                  np.require(values, np.float64, "CA"))
 
     def _commit(self, values: np.ndarray, layers: dict[str, np.ndarray]) -> None:
         """A complete pass (``values`` (C, pixels), and the layers it reached) joins the moments."""
