@@ -105,10 +105,10 @@ def test_recorded_densities_are_the_sampled_ones(params, local):
 
 
 def test_recorded_densities_leave_out_the_light_walks_roulette_by_default():
-    """BDPT's default (mis_roulette "camera"): the camera walk's survival in the densities either walk records
-    for it, the light walk's in none."""
+    """BDPT's default (mis_roulette "auto", which is "camera" under the default albedo roulette): the camera
+    walk's survival in the densities either walk records for it, the light walk's in none."""
     scene, bdpt, batch = subpaths("cornell-box")
-    assert bdpt.mis_roulette == "camera"
+    assert bdpt.mis_roulette == "auto" and bdpt.roulette.in_mis and not bdpt.light_roulette.in_mis
     albedo = lambda sub: lambda v: scene.materials.albedo[sub.material[v]]  # noqa: E731
     ones = lambda v: np.ones(v.size)  # noqa: E731
     for sub, mine, theirs in ((batch.eye, albedo(batch.eye), ones), (batch.light, ones, albedo(batch.light))):

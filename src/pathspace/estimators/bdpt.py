@@ -29,15 +29,22 @@ rr, rr_depth, rr_probability, rr_cap : "albedo" (default), 1, 0.5, 1.0
     Russian roulette on both subpaths (see :mod:`pathspace.roulette`).
 light_rr, light_rr_depth, light_rr_probability, light_rr_cap : None
     The light subpaths' own roulette (None: as the camera subpaths').
-mis_roulette : "camera" (default), "both", "light" or "none"
+mis_roulette : "auto" (default), "both", "camera", "light" or "none"
     Which subpaths' local roulette (survival probabilities of "off", "fixed"
     and "albedo"; never "throughput", which depends on the walk) enters the
     vertex densities the MIS weights compare.  Every choice is unbiased and
-    samples the same paths.  The default leaves the light subpaths' out: 10%
-    lower error at the same samples than "both" (SmallVCM's choice) on the
-    diffuse Cornell box, 5-16% lower on six of the eleven other scenes in
-    ``scenes/``, the same on three, 5-7% higher on the white furnace
-    (docs/performance.md).  PSSMLT over BDPT and MLT's BDPT part take it too.
+    samples the same paths.  "auto" is "camera" where the light subpaths'
+    roulette is "albedo" (the default) and "both" otherwise.  Leaving the
+    light subpaths' albedo survival out gives 10% lower error at the same
+    samples than "both" (SmallVCM's choice) on the diffuse Cornell box, 5-16%
+    lower on six of the eleven other scenes in ``scenes/``, the same on
+    three, 5-7% higher on the white furnace.  Albedo survival keeps a light
+    subpath's throughput level; a "fixed" survival below the albedo raises
+    it, and left out of the densities the weights no longer hold those
+    paths back: with survival 0.3 ("fixed", rr_probability 0.7) on the light
+    subpaths "camera" has 36 times the error of "both" on the diffuse box
+    (docs/performance.md).  PSSMLT over BDPT and MLT's BDPT part take the
+    default too.
 diffuse_sampling : "cosine" (default) or "uniform"
 pyramid : int, default 0
     Record, for every path length up to this many segments and every
@@ -78,7 +85,7 @@ class BDPT(Bidirectional):
     mis_beta: float = p.mis_beta()
     strategy: tuple | None = p.mis_strategy()
     mis_strategies: object = p.mis_strategies()
-    mis_roulette: str = p.mis_roulette("camera")
+    mis_roulette: str = p.mis_roulette()
 
     name = "bdpt"
     uses_lens_hits = True
@@ -91,7 +98,10 @@ class BDPT(Bidirectional):
             raise ValueError("mis_strategies: not used with mis='single' (which keeps one strategy already)")
 
     def _roulette_in_mis(self) -> tuple[bool, bool]:
-        return self.mis_roulette in ("both", "camera"), self.mis_roulette in ("both", "light")
+        choice = self.mis_roulette
+        if choice == "auto":   # leave out only a light roulette that keeps the throughput level (docstring)
+            choice = "camera" if (self.light_rr or self.rr) == "albedo" else "both"
+        return choice in ("both", "camera"), choice in ("both", "light")
 
     def plan(self, scene) -> list[str]:
         """What this estimator will do on ``scene``, and what it leaves out and why."""

@@ -83,13 +83,14 @@ def light_rr_cap():
                      or_none(partial(number, low=0.0, high=1.0, low_open=True, what="a survival cap in (0, 1]")))
 
 
-MIS_ROULETTE = ("both", "camera", "light", "none")
+MIS_ROULETTE = ("auto", "both", "camera", "light", "none")
 
 
-def mis_roulette(default: str = "camera"):
+def mis_roulette(default: str = "auto"):
     """Which subpaths' local roulette enters the vertex densities MIS compares."""
     return parameter(default, "which subpaths' local Russian roulette (survival probability) enters the vertex "
-                              "densities MIS compares: 'both', 'camera' (the light subpaths' is left out), 'light' or "
+                              "densities MIS compares: 'auto' ('camera' where the light subpaths' roulette is "
+                              "'albedo', else 'both'), 'both', 'camera' (the light subpaths' is left out), 'light' or "
                               "'none'; any choice is unbiased", partial(choice, options=MIS_ROULETTE))
 
 
