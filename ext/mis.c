@@ -12,10 +12,13 @@
  * one vertex at a time, as in pbrt-v4's MISWeight, so no product of raw pdfs
  * is ever formed, and carried as a double that takes a separate binary exponent
  * whenever it nears over- or underflow, so that paths of hundreds of vertices
- * whose densities span hundreds of decades stay exact to rounding; a pdf of 0 (delta vertices) is remapped to 1 so that the
- * ratio through a delta vertex is 1, and a strategy is counted only if the
- * connection it needs joins two non-delta vertices (s' = 0: the light can be
- * hit; s' = k + 1: the camera can be hit).
+ * whose densities span hundreds of decades stay exact to rounding; a pdf of 0
+ * (one that does not exist, as pbrt-v4 stores around delta vertices) is
+ * remapped to 1 -- BDPT's subpaths give a specular vertex's neighbours the
+ * densities of Veach's convention instead (pathspace.estimators.subpaths) --,
+ * and a strategy is counted only if the connection it needs joins two
+ * non-delta vertices (s' = 0: the light can be hit; s' = k + 1: the camera
+ * can be hit).
  *
  * Inputs per connection m: s, t, lane, flags of the light at x_0 (LIGHT_DELTA:
  * it cannot be hit by rays -- point, spot and directional lights;

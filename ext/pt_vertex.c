@@ -9,7 +9,9 @@
  *   2. a BSDF sample: Lambertian (cosine-weighted, ext/warp.h, or uniform over the hemisphere), a delta mirror,
  *      or a smooth dielectric (Fresnel-weighted choice of reflection and refraction, radiance scaled by
  *      1 / eta^2 on refraction, importance not; Veach 1997, sec. 5.2); for subpaths, the density with which the
- *      BSDF would sample the way back with light arriving along the sample (Veach 1997, eq. 10.7);
+ *      BSDF would sample the way back with light arriving along the sample (Veach 1997, eq. 10.7), and at
+ *      specular vertices both MIS densities of the module pathspace.estimators.subpaths (the lobe's probability
+ *      times eta^2 |cos| of the sample, and times |cos| of the arrival: the deltas left out, not the geometry);
  *   3. Russian roulette's survival probability (pathspace.roulette.RussianRoulette.survival, every policy), and
  *      the step to the next ray: throughput, survival and origin (ext/scatter.h).
  * The BSDFs are those of pathspace.bsdfs (diffuse.py, mirror.py, dielectric.py and fresnel.py), which stay the
@@ -293,9 +295,13 @@ static void scatter(const VertexArrays *va, const Options *o, int roulette, cons
         va->delta[i] = (npy_bool)s->delta;
         if (va->eta_out)
             va->eta_out[i] = eta_scale * s->eta * s->eta;
-        if (va->pdf_back) { /* light arriving along the sample, toward where the walk came from */
+        if (va->pdf_back && s->delta) { /* MIS densities of a specular vertex: the lobe's probability times the
+                                           * geometry of its directions (subpaths.specular_densities) */
+            va->pdf[i] = s->pdf * (s->eta * s->eta) * (double)fabsf(ps_dot3(ng, s->wi));
+            va->pdf_back[i] = s->pdf * (double)fabsf(va->cos[i]);
+        } else if (va->pdf_back) { /* light arriving along the sample, toward where the walk came from */
             float back[3] = {-va->direction[i], -va->direction[n + i], -va->direction[2 * n + i]};
-            va->pdf_back[i] = s->delta ? 0.0 : ps_diffuse_reverse_pdf(o->diffuse_technique, ng, s->wi, back);
+            va->pdf_back[i] = ps_diffuse_reverse_pdf(o->diffuse_technique, ng, s->wi, back);
         }
     }
 }

@@ -14,6 +14,7 @@ import pytest
 
 import pathspace as ps
 from pathspace.bsdfs import MaterialLanes, Surface
+from pathspace.bsdfs.fresnel import fresnel_dielectric
 from pathspace.estimators.base import Counters
 from pathspace.estimators.bidirectional import STREAMS
 from pathspace.estimators.control import RenderControl
@@ -117,6 +118,42 @@ def test_recorded_densities_leave_out_the_light_walks_roulette_by_default():
         np.testing.assert_allclose(sub.fwd[nxt], fwd, rtol=2e-3)
         np.testing.assert_allclose(sub.rev[prev], rev, rtol=2e-3)
         np.testing.assert_array_equal(sub.q[nxt - 1], mine(nxt - 1))
+
+
+@pytest.mark.parametrize("kernel", ["fused", "numpy"])
+def test_densities_through_specular_vertices_keep_their_geometry(kernel):
+    """Around a specular vertex x_i (mirror, glass) the walks record Veach's densities with the deltas left out:
+    x_{i+1} has P G(x_i, x_{i+1}) (eta_next / eta_prev)^2 and x_{i-1} the reverse P G(x_{i-1}, x_i), P the
+    probability of the lobe taken (1, or Fresnel's F or 1 - F), recomputed here from the vertices: no density
+    0 that MIS would read as 1 (subpaths' module docstring)."""
+    scene, _, batch = subpaths("cornell-box-specular", mis_roulette="none", kernel=kernel)
+    ior = np.array([getattr(m, "ior", 1.0) for m in scene.materials.materials], dtype=np.float64)
+    checked = 0
+    for sub in (batch.eye, batch.light):
+        here = np.flatnonzero(sub.delta & (sub.kind == SURFACE))
+        here = here[(here >= 1) & (here + 1 < sub.count)]
+        here = here[(sub.lane[here - 1] == sub.lane[here]) & (sub.lane[here + 1] == sub.lane[here])]
+        p, n = sub.p.astype(np.float64), sub.n.astype(np.float64)
+        to_prev, to_next = p[:, here - 1] - p[:, here], p[:, here + 1] - p[:, here]
+        d_prev, d_next = np.linalg.norm(to_prev, axis=0), np.linalg.norm(to_next, axis=0)
+        keep = (np.minimum(d_prev, d_next) > 0.02) & (sub.kind[here - 1] == SURFACE) & (sub.kind[here + 1] == SURFACE)
+        here, to_prev, to_next, d_prev, d_next = (here[keep], to_prev[:, keep] / d_prev[keep],
+                                                  to_next[:, keep] / d_next[keep], d_prev[keep], d_next[keep])
+        cos_in, cos_out = (n[:, here] * to_prev).sum(0), (n[:, here] * to_next).sum(0)
+        reflected = np.sign(cos_in) == np.sign(cos_out)
+        eta = np.where(cos_in > 0, ior[sub.material[here]], 1.0 / ior[sub.material[here]])   # eta_next / eta_prev
+        fresnel = fresnel_dielectric(np.abs(cos_in), eta)[0]
+        glass = ior[sub.material[here]] != 1.0
+        lobe = np.where(glass, np.where(reflected, fresnel, 1.0 - fresnel), 1.0)
+        eta2 = np.where(glass & ~reflected, eta * eta, 1.0)
+        cos_next = np.abs((n[:, here + 1] * to_next).sum(0))
+        cos_prev = np.abs((n[:, here - 1] * to_prev).sum(0))
+        np.testing.assert_allclose(sub.fwd[here + 1], lobe * eta2 * np.abs(cos_out) * cos_next / d_next ** 2,
+                                   rtol=2e-3)
+        np.testing.assert_allclose(sub.rev[here - 1], lobe * np.abs(cos_in) * cos_prev / d_prev ** 2, rtol=2e-3)
+        checked += here.size
+        assert (~reflected & glass).any() and (reflected & ~glass).any()
+    assert checked > 200
 
 
 def test_an_emptied_wavefront_keeps_its_dtypes_through_split_and_extend():

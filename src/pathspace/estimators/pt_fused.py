@@ -51,7 +51,9 @@ class VertexResult:
     surface's ``normal`` turned toward the arriving ray); the walk's next ``beta`` (3, N), ``alive``,
     ``origin``, ``direction``, ``pdf``, ``delta`` and ``eta_scale`` (None without throughput roulette of
     radiance); the density with which the BSDF samples the way back, light arriving along the new direction
-    (``pdf_back``, for subpaths; else None); and the number of ``light_samples`` taken."""
+    (``pdf_back``, for subpaths; else None); and the number of ``light_samples`` taken.  For subpaths, ``pdf``
+    and ``pdf_back`` of specular samples are the MIS densities of
+    :func:`~pathspace.estimators.subpaths.specular_densities`."""
 
     value: np.ndarray
     useful: np.ndarray

@@ -19,8 +19,24 @@ the MIS densities (``RussianRoulette.in_mis``; BDPT's ``mis_roulette``), so
 that the reverse densities can be stored once; see :mod:`pathspace.roulette`.
 Densities at points at infinity (the environment) are in solid angle; the
 density of a vertex generated from infinity is the density on the disk the
-rays start from, projected (times |cos| at the vertex).  Delta (specular)
-vertices carry density 0 toward their neighbours.
+rays start from, projected (times |cos| at the vertex).
+
+A specular (delta) vertex x_i samples its next direction with a Dirac delta
+whose weight is the chosen lobe's probability P; the walk in the opposite
+direction samples x_{i-1} from x_i with the same delta and the same P.  The
+deltas cancel in every ratio of strategy densities (Veach 1997, sec. 10.3.5;
+no strategy joins at x_i), but the geometry around x_i does not: over
+projected solid angle, P G(x_i, x_{i+1}) (eta_next / eta_prev)^2 and
+P G(x_{i-1}, x_i) are the densities with the deltas left out, the factor
+eta^2 being Snell's Jacobian between the projected solid angles on the two
+sides of a refraction (Veach 1997, sec. 5.2).  So the direction a walk
+leaves a specular vertex by has the MIS density P eta^2 |cos_out| (solid
+angle equivalent; :func:`specular_densities`) and the direction back
+P |cos_in|.  Leaving the geometry out -- density 0, read as 1, pbrt's
+convention -- weighs a path's strategies by the wrong factor
+G(x_{i-1}, x_i) / G(x_i, x_{i+1}): a caustic under a glass sphere resting
+on the floor then went to the camera walk that finds the light through the
+sphere rather than to light tracing, with fireflies.
 
 Vertices of all lanes are stored flat, lane after lane, with CSR offsets, so
 that connections gather any (lane, vertex) pair in one array operation
@@ -53,7 +69,7 @@ from .wavefront import Lanes, take_lanes
 
 __all__ = ["Subpaths", "Vertices", "LensHits", "SubpathSettings", "SURFACE", "CAMERA", "LIGHT", "SAFETY_VERTICES",
            "CAMERA_START", "LIGHT_START", "CAMERA_VERTEX", "LIGHT_VERTEX", "camera_subpaths", "light_subpaths",
-           "stream_light_vertices", "to_area", "area_density", "cos_at", "reverse_pdf"]
+           "stream_light_vertices", "to_area", "area_density", "cos_at", "specular_densities", "reverse_pdf"]
 
 SURFACE, CAMERA, LIGHT = 0, 1, 2
 # Subpaths still growing at this many vertices are cut (and counted): only lossless traps get there.
@@ -92,6 +108,19 @@ def area_density(pdf_sa: np.ndarray, cos: np.ndarray, dist2: np.ndarray) -> np.n
     positive."""
     with np.errstate(divide="ignore", invalid="ignore"):
         return np.where(dist2 > 0, pdf_sa * cos / dist2, 0.0)
+
+
+def specular_densities(pdf: np.ndarray, delta: np.ndarray, eta: np.ndarray | None, normal: np.ndarray,
+                       wi: np.ndarray, cos_in: np.ndarray, pdf_back: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The MIS densities of the directions sampled at specular vertices (module docstring): (the density of
+    ``wi`` -- P eta^2 |cos(normal, wi)| where ``delta``, else ``pdf`` --, the density back toward where the
+    walk came from -- P |cos_in| where ``delta``, else ``pdf_back``), with P the lobe's probability ``pdf``,
+    ``eta`` the relative index the sample crossed (None: 1) and ``cos_in`` the cosine of the arrival;
+    ``ext/pt_vertex.c`` computes them so, bit for bit."""
+    eta2 = 1.0 if eta is None else eta * eta
+    forward = pdf * eta2 * np.abs(dot(normal, wi)).astype(np.float64)
+    back = pdf * np.abs(cos_in).astype(np.float64)
+    return np.where(delta, forward, pdf), np.where(delta, back, pdf_back)
 
 
 def reverse_pdf(materials: MaterialLanes, n: np.ndarray, wi: np.ndarray, wo: np.ndarray) -> np.ndarray:
@@ -333,9 +362,10 @@ class _Growth:
                 break
 
     def _mis_pdf(self) -> np.ndarray:
-        """The density, as MIS sees it, of the current direction (0 after a delta lobe, with q)."""
+        """The density, as MIS sees it, of the current direction (after a delta lobe, the specular density of the
+        module docstring), with q."""
         lanes = self.walk.lanes
-        return np.where(lanes.delta, 0.0, lanes.pdf) * lanes.q
+        return lanes.pdf * lanes.q
 
     def _vertex(self, arrival: Arrival) -> bool:
         """Record the vertex reached, sample the next direction there, and roulette (False: the walks stop)."""
@@ -367,12 +397,15 @@ class _Growth:
         else:
             materials = MaterialLanes(table, arrival.material, settings.colours.take(lanes.lane), settings.options)
             sample = materials.sample(arrival.surface, u.bsdf, walk.transport)
-            if settings.densities:
-                pdf_back = np.where(sample.delta, 0.0,
-                                    reverse_pdf(materials, arrival.normal, sample.wi, -lanes.direction))
+            if settings.densities:   # as ext/pt_vertex.c gives them
+                mis_pdf, pdf_back = specular_densities(
+                    sample.pdf, sample.delta, sample.eta, arrival.normal, sample.wi, arrival.cos,
+                    reverse_pdf(materials, arrival.normal, sample.wi, -lanes.direction))
             if sample.terminated is not None:
                 self.terminated[lanes.lane[sample.terminated]] = True
             alive = walk.scatter(arrival, sample, u.roulette, walk.survival(arrival, sample), densities.get("q"))
+            if settings.densities:
+                lanes.pdf = mis_pdf
         if settings.densities:
             # The previous vertex as the opposite walk would generate it from here (Veach 1997, eq. 10.7).
             pdf_back = pdf_back * densities["q_rev"]
