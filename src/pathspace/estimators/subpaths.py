@@ -24,7 +24,7 @@ rays start from, projected (times |cos| at the vertex).
 A specular (delta) vertex x_i samples its next direction with a Dirac delta
 whose weight is the chosen lobe's probability P; the walk in the opposite
 direction samples x_{i-1} from x_i with the same delta and the same P.  The
-deltas cancel in every ratio of strategy densities (Veach 1997, sec. 10.3.5;
+deltas cancel in every ratio of strategy densities (Veach 1997, ch. 10;
 no strategy joins at x_i), but the geometry around x_i does not: over
 projected solid angle, P G(x_i, x_{i+1}) (eta_next / eta_prev)^2 and
 P G(x_{i-1}, x_i) are the densities with the deltas left out, the factor
