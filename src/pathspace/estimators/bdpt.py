@@ -66,6 +66,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..mis import SubpathPdfs, check_heuristic, mis_weights
+from ..roulette import RussianRoulette
 from ..spectra import RGBColours
 from . import parameters as p
 from .bidirectional import Bidirectional
@@ -97,10 +98,10 @@ class BDPT(Bidirectional):
         if self.mis == "single" and self.mis_strategies is not None:
             raise ValueError("mis_strategies: not used with mis='single' (which keeps one strategy already)")
 
-    def _roulette_in_mis(self) -> tuple[bool, bool]:
+    def _roulette_in_mis(self, light: RussianRoulette) -> tuple[bool, bool]:
         choice = self.mis_roulette
         if choice == "auto":   # leave out only a light roulette that keeps the throughput level (docstring)
-            choice = "camera" if (self.light_rr or self.rr) == "albedo" else "both"
+            choice = "camera" if light.policy == "albedo" else "both"
         return choice in ("both", "camera"), choice in ("both", "light")
 
     def plan(self, scene) -> list[str]:

@@ -18,7 +18,7 @@ paths made from given numbers.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Callable, Iterator, Mapping
 
 import numpy as np
@@ -93,14 +93,16 @@ class Bidirectional(Estimator):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        camera_in_mis, light_in_mis = self._roulette_in_mis()
-        self.roulette = RussianRoulette(self.rr, self.rr_depth, self.rr_probability, self.rr_cap, camera_in_mis)
-        self.light_roulette = RussianRoulette(*(own if own is not None else camera for own, camera in (
+        camera = RussianRoulette(self.rr, self.rr_depth, self.rr_probability, self.rr_cap)
+        light = RussianRoulette(*(own if own is not None else shared for own, shared in (
             (self.light_rr, self.rr), (self.light_rr_depth, self.rr_depth),
-            (self.light_rr_probability, self.rr_probability), (self.light_rr_cap, self.rr_cap))), light_in_mis)
+            (self.light_rr_probability, self.rr_probability), (self.light_rr_cap, self.rr_cap))))
+        camera_in_mis, light_in_mis = self._roulette_in_mis(light)
+        self.roulette, self.light_roulette = replace(camera, in_mis=camera_in_mis), replace(light, in_mis=light_in_mis)
 
-    def _roulette_in_mis(self) -> tuple[bool, bool]:
-        """Whether the camera and the light subpaths' local roulette enter the vertex densities (both here)."""
+    def _roulette_in_mis(self, light: RussianRoulette) -> tuple[bool, bool]:
+        """Whether the camera and the light subpaths' local roulette enter the vertex densities, given the light
+        subpaths' ``light`` (both here)."""
         return True, True
 
     def _walk_plan(self, scene) -> str:
