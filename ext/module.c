@@ -115,6 +115,10 @@ static PyMethodDef module_methods[] = {
     {"take_lanes", ps_take_lanes, METH_VARARGS,
      "take_lanes(indices, arrays)\n--\n\nlist: numpy.take(a, indices, axis=-1) of every array a of the list `arrays` "
      "(lanes along the last axis, as many in each), in one call with the GIL released (see ext/lanes.c)."},
+    {"place_lanes", ps_place_lanes, METH_VARARGS,
+     "place_lanes(positions, parts, width)\n--\n\nlist: for every field f, an array out of `width` lanes with "
+     "out[..., positions[p]] = parts[p][f] for every part p (positions: int64 arrays covering 0 .. width - 1 once "
+     "each), in one call with the GIL released (see ext/lanes.c)."},
     {"cosine_about", ps_cosine_about, METH_VARARGS,
      "cosine_about(n, u0, cos_phi, sin_phi)\n--\n\n(3, N) float32: directions cosine-distributed about unit normals "
      "n ((3, N) float32), n plus the point of the unit sphere at z = 1 - 2 u0 and angle phi, normalised "

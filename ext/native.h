@@ -115,8 +115,10 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args);
 /* BDPT's joins of light and camera vertices: contributions and MIS densities (join.c). */
 PyObject *ps_join_vertices(PyObject *module, PyObject *args);
 
-/* The columns `indices` of every per-lane array: a wavefront's compaction (lanes.c). */
+/* The columns `indices` of every per-lane array: a wavefront's compaction; and its inverse, parts of a wavefront
+ * placed into one at given columns: subpaths flattened into lane order (lanes.c). */
 PyObject *ps_take_lanes(PyObject *module, PyObject *args);
+PyObject *ps_place_lanes(PyObject *module, PyObject *args);
 
 /* Cosine-weighted directions about unit normals (warp.c). */
 PyObject *ps_cosine_about(PyObject *module, PyObject *args);

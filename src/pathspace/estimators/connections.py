@@ -322,12 +322,16 @@ def joins(batch: Batch):
     pair_start = np.concatenate([[0], np.cumsum(pairs)])
     for first, last in zip(batch.units[:-1], batch.units[1:]):
         for begin in range(int(pair_start[first]), int(pair_start[last]), CHUNK):
-            k = np.arange(begin, min(begin + CHUNK, int(pair_start[last])))
-            lane = np.searchsorted(pair_start[:-1], k, side="right") - 1
-            # Lanes without pairs share their start with the next lane; searchsorted picks the last of them.
-            local = k - pair_start.take(lane)
-            y = cy.take(y_start.take(lane) + local // nz.take(lane))
-            z = cz.take(z_start.take(lane) + local % nz.take(lane))
+            end = min(begin + CHUNK, int(pair_start[last]))
+            k = np.arange(begin, end)
+            # The lanes of pairs begin .. end - 1: lanes first .. stop - 1 have some, as many as their pair range
+            # overlaps the chunk's (lanes without pairs: none).
+            start = int(np.searchsorted(pair_start, begin, side="right")) - 1
+            stop = int(np.searchsorted(pair_start, end - 1, side="right"))
+            lane = np.repeat(np.arange(start, stop), np.diff(np.clip(pair_start[start:stop + 1], begin, end)))
+            nth_y, nth_z = np.divmod(k - pair_start.take(lane), nz.take(lane))   # the lane's pair nz nth_y + nth_z
+            y = cy.take(y_start.take(lane) + nth_y)
+            z = cz.take(z_start.take(lane) + nth_z)
             s, t = light.index.take(y) + 1, eye.index.take(z) + 1
             ok = s + t - 1 <= batch.max_depth
             if not ok.all():

@@ -12,7 +12,7 @@ import numpy as np
 
 from .. import _native
 
-__all__ = ["ItemBook", "Lanes", "take_lanes"]
+__all__ = ["ItemBook", "Lanes", "place_lanes", "take_lanes"]
 
 
 class ItemBook:
@@ -70,6 +70,21 @@ def take_lanes(indices: np.ndarray, *arrays: np.ndarray) -> list[np.ndarray]:
     (unlike ``np.take``, no negative ones: IndexError)."""
     indices = np.ascontiguousarray(indices).astype(np.int64, casting="safe", copy=False)
     return _native.take_lanes(indices, list(arrays))
+
+
+def place_lanes(positions: list[np.ndarray], parts: list[list[np.ndarray]]) -> list[np.ndarray]:
+    """Parts of a wavefront placed into one: for every field f, an array ``out`` with ``out[..., positions[p]] =
+    parts[p][f]`` for every part p -- ``np.concatenate`` over the parts of field f, gathered into the inverse
+    order -- in one C call that releases the GIL (``ext/lanes.c``).  ``positions``: integer arrays that cover
+    0 .. N - 1 once each, N their total size (else ValueError).  A field has the type ``np.concatenate`` would
+    give it, in native byte order; bool or numeric, lanes along the last of one or two axes (else TypeError)."""
+    positions = [np.ascontiguousarray(at).astype(np.int64, casting="safe", copy=False) for at in positions]
+    columns = []
+    for column in zip(*parts):
+        dtype = np.result_type(*column).newbyteorder("=")
+        columns.append([np.ascontiguousarray(a, dtype=dtype) for a in column])
+    fields = [list(part) for part in zip(*columns)] if columns else [[] for _ in parts]
+    return _native.place_lanes(positions, fields, sum(at.size for at in positions))
 
 
 class Lanes:
