@@ -52,6 +52,17 @@ static void gather(const Gather *g, const int64_t *indices, npy_intp k)
     }
 }
 
+/* A new C-contiguous array of `array`'s type and rows (one or two dimensions) with `lanes` lanes; NULL with the
+ * exception set if the allocation fails. */
+static PyObject *lanes_like(PyArrayObject *array, npy_intp lanes)
+{
+    int ndim = PyArray_NDIM(array);
+    npy_intp dims[2] = {ndim == 2 ? PyArray_DIM(array, 0) : lanes, lanes};
+    PyArray_Descr *descr = PyArray_DESCR(array);
+    Py_INCREF(descr);
+    return PyArray_NewFromDescr(&PyArray_Type, descr, ndim, dims, NULL, NULL, 0, NULL);
+}
+
 PyObject *ps_take_lanes(PyObject *module, PyObject *args)
 {
     (void)module;
@@ -99,10 +110,7 @@ PyObject *ps_take_lanes(PyObject *module, PyObject *args)
             PyList_SET_ITEM(out, a, taken);
             continue;
         }
-        npy_intp dims[2] = {ndim == 2 ? PyArray_DIM(array, 0) : k, k};
-        PyArray_Descr *descr = PyArray_DESCR(array);
-        Py_INCREF(descr);
-        PyObject *taken = PyArray_NewFromDescr(&PyArray_Type, descr, ndim, dims, NULL, NULL, 0, NULL);
+        PyObject *taken = lanes_like(array, k);
         if (!taken)
             goto fail;
         PyList_SET_ITEM(out, a, taken);
@@ -288,12 +296,7 @@ PyObject *ps_place_lanes(PyObject *module, PyObject *args)
         start += lanes;
     }
     for (Py_ssize_t f = 0; f < nfields; ++f) {
-        PyArrayObject *first = (PyArrayObject *)PySequence_Fast_GET_ITEM(fields[0], f);
-        int ndim = PyArray_NDIM(first);
-        npy_intp dims[2] = {ndim == 2 ? PyArray_DIM(first, 0) : width, width};
-        PyArray_Descr *descr = PyArray_DESCR(first);
-        Py_INCREF(descr);
-        PyObject *array = PyArray_NewFromDescr(&PyArray_Type, descr, ndim, dims, NULL, NULL, 0, NULL);
+        PyObject *array = lanes_like((PyArrayObject *)PySequence_Fast_GET_ITEM(fields[0], f), width);
         if (!array)
             goto fail;
         PyList_SET_ITEM(out, f, array);
