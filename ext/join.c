@@ -1,17 +1,34 @@
 /*
- * Bidirectional path tracing's joins of a light vertex y = y_{s-1} and a camera vertex z = z_{t-1} (strategies
- * s, t >= 2: pathspace.estimators.connections._join, for the scenes pathspace.estimators.join_fused serves), in
- * one pass with the GIL released.  Per pair, with d = z - y, w = d / |d| (float32) and both vertices diffuse:
+ * Bidirectional path tracing's joins in one pass each, with the GIL released (for the scenes
+ * pathspace.estimators.join_fused serves).
+ *
+ * join_vertices: a light vertex y = y_{s-1} and a camera vertex z = z_{t-1} (strategies s, t >= 2:
+ * pathspace.estimators.connections._join).  Per pair, with d = z - y, w = d / |d| (float32) and both vertices diffuse:
  *   - the unweighted contribution C*_{s,t} = beta_y f_y(w) f_z(-w) beta_z / |d|^2 (Veach 1997, eq. 10.8; f |cos|
  *     of each surface turned toward the vertex its walk came from, ext/diffuse.h), before the shadow ray;
  *   - the densities MIS needs of the two vertices the join changes (ext/mis.c's qs_rev, qs_minus_rev, pt_rev and
  *     pt_minus_rev): the density with which each vertex's BSDF samples the other, turned into area measure
  *     (p |cos| / d^2, Veach 1997, eq. 8.10; times the roulette's survival q there), and with which each samples
  *     its own predecessor when light arrives along the join (times q_rev and g_prev, Veach 1997, eq. 10.7).
+ *
+ * join_light_samples: a camera vertex z = z_{t-1} and a fresh point y_0 on an area light (s = 1, next-event
+ * estimation: pathspace.estimators.connections.light_samples).  Per vertex, the light sample of ext/light_sample.h
+ * from the vertex's first three connection numbers (a triangle by the selection CDF, a point uniform in its area;
+ * density pdf_light in solid angle, with the pmf), w the direction toward it, d its distance:
+ *   - the unweighted contribution C*_{1,t} = beta_z f_z(w) Le / pdf_light (Veach 1997, eq. 10.8 with the light
+ *     sample's density in solid angle), 0 where the light does not face z or pdf_light is not positive;
+ *   - the light point, its normal and ray offset (for the shadow ray), its emitting triangle;
+ *   - the densities of the vertices the join changes: y_0's origin density pmf / area (qs_fwd), the density with
+ *     which z's BSDF samples y_0, in area measure (qs_rev), the light's cosine-weighted emission toward z in area
+ *     measure (pt_rev: cos / pi, halved for two-sided lights, times |cos_z| / d^2), and z sampling its
+ *     predecessor when light arrives from y_0 (pt_minus_rev, times q_rev and g_prev).
+ *
  * Every value is computed in the operations and order of the NumPy code (which the tests keep as the reference:
- * tests/estimators/test_join_kernel.py), so the contributions and densities are bit for bit the same.  RGB only.
+ * tests/estimators/test_join_kernel.py and test_light_join_kernel.py), so the contributions and densities are bit
+ * for bit the same.  RGB only.
  */
 #include "diffuse.h"
+#include "light_sample.h"
 
 #define NPY_NO_DEPRECATED_API NPY_2_0_API_VERSION
 #define NO_IMPORT_ARRAY
@@ -46,8 +63,9 @@ typedef struct {
     const int64_t *material;
 } Side;
 
-/* 0 if the fields of the subpath at a[first] agree with V = the columns of its p; else -1 with a ValueError. */
-static int side_of(PyArrayObject **a, int first, const char *name, Side *side)
+/* 0 if the fields of the subpath at a[first] agree with V = the columns of its p; else -1 with a ValueError naming
+ * the kernel and the subpaths. */
+static int side_of(PyArrayObject **a, int first, const char *kernel, const char *name, Side *side)
 {
     npy_intp v = PyArray_DIM(a[first + F_P], 1);
     int ok = PyArray_DIM(a[first + F_BETA], 0) == CHANNELS && PyArray_DIM(a[first + F_BETA], 1) == v;
@@ -56,8 +74,8 @@ static int side_of(PyArrayObject **a, int first, const char *name, Side *side)
     for (int f = F_MATERIAL; f < F_COUNT; ++f)
         ok = ok && PyArray_DIM(a[first + f], 0) == v;
     if (!ok) {
-        PyErr_Format(PyExc_ValueError, "join_vertices: the %s subpaths' p, n and wo (3, V), beta (3, V), material, q, "
-                     "q_rev and g_prev (V,) must agree", name);
+        PyErr_Format(PyExc_ValueError, "%s: the %s subpaths' p, n and wo (3, V), beta (3, V), material, q, q_rev and "
+                     "g_prev (V,) must agree", kernel, name);
         return -1;
     }
     *side = (Side){v, (const float *)PyArray_DATA(a[first + F_P]), (const float *)PyArray_DATA(a[first + F_N]),
@@ -105,8 +123,9 @@ PyObject *ps_join_vertices(PyObject *module, PyObject *args)
         return NULL;
     PyArrayObject *a[A_COUNT];
     Side light, eye;
-    if (ps_checked_arrays(objs, SPECS, A_COUNT, (PyObject **)a) < 0 || side_of(a, A_LIGHT, "light", &light) < 0 ||
-        side_of(a, A_EYE, "camera", &eye) < 0)
+    if (ps_checked_arrays(objs, SPECS, A_COUNT, (PyObject **)a) < 0 ||
+        side_of(a, A_LIGHT, "join_vertices", "light", &light) < 0 ||
+        side_of(a, A_EYE, "join_vertices", "camera", &eye) < 0)
         return NULL;
     npy_intp k = PyArray_DIM(a[A_Y], 0), m = PyArray_DIM(a[A_DIFFUSE], 0);
     if (PyArray_DIM(a[A_Z], 0) != k || PyArray_DIM(a[A_REFLECTANCE], 0) != CHANNELS ||
@@ -188,4 +207,136 @@ PyObject *ps_join_vertices(PyObject *module, PyObject *args)
         return NULL;
     }
     return Py_BuildValue("(NNNNN)", out[0], out[1], out[2], out[3], out[4]);
+}
+
+
+/* join_light_samples' arguments: the camera subpaths, their connection numbers, the vertices joined, the
+ * materials' tables and the emitting triangles'. */
+enum {
+    L_EYE = 0, L_U = F_COUNT, L_Z, L_DIFFUSE, L_REFLECTANCE, L_TABLE, L_AREA, L_TWO_SIDED, L_CDF, L_PMF, L_RADIANCE,
+    L_COUNT
+};
+
+static const PsArraySpec LIGHT_SPECS[L_COUNT] = {
+    SUBPATH_SPECS,
+    {"u", NPY_DOUBLE, "float64", 2, 0},        {"z", NPY_INT64, "int64", 1, 0},
+    {"diffuse", NPY_BOOL, "bool", 1, 0},       {"reflectance", NPY_DOUBLE, "float64", 2, 0},
+    {"table", NPY_FLOAT, "float32", 2, 0},     {"area", NPY_DOUBLE, "float64", 1, 0},
+    {"two_sided", NPY_BOOL, "bool", 1, 0},     {"cdf", NPY_DOUBLE, "float64", 1, 0},
+    {"pmf", NPY_DOUBLE, "float64", 1, 0},      {"radiance", NPY_DOUBLE, "float64", 2, 0},
+};
+
+/* The outputs of join_light_samples, in the order it returns them. */
+enum { O_VALUE, O_ENTITY, O_POINT, O_NORMAL, O_EPSILON, O_QS_FWD, O_QS_REV, O_PT_REV, O_PT_MINUS_REV, O_COUNT };
+
+PyObject *ps_join_light_samples(PyObject *module, PyObject *args)
+{
+    (void)module;
+    PyObject *objs[L_COUNT];
+    int technique;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOOOOOi:join_light_samples", &objs[0], &objs[1], &objs[2], &objs[3],
+                          &objs[4], &objs[5], &objs[6], &objs[7], &objs[8], &objs[9], &objs[10], &objs[11],
+                          &objs[12], &objs[13], &objs[14], &objs[15], &objs[16], &objs[17], &technique))
+        return NULL;
+    PyArrayObject *a[L_COUNT];
+    Side eye;
+    if (ps_checked_arrays(objs, LIGHT_SPECS, L_COUNT, (PyObject **)a) < 0 ||
+        side_of(a, L_EYE, "join_light_samples", "camera", &eye) < 0)
+        return NULL;
+    npy_intp k = PyArray_DIM(a[L_Z], 0), m = PyArray_DIM(a[L_DIFFUSE], 0), e = PyArray_DIM(a[L_AREA], 0);
+    if (PyArray_DIM(a[L_U], 0) < 3 || PyArray_DIM(a[L_U], 1) != eye.count) {
+        PyErr_SetString(PyExc_ValueError, "join_light_samples: u must have at least 3 rows and a column per camera "
+                                          "vertex");
+        return NULL;
+    }
+    if (PyArray_DIM(a[L_REFLECTANCE], 0) != CHANNELS || PyArray_DIM(a[L_REFLECTANCE], 1) != m) {
+        PyErr_SetString(PyExc_ValueError, "join_light_samples: diffuse (M,) and reflectance (3, M) must agree");
+        return NULL;
+    }
+    if (e < 1 || PyArray_DIM(a[L_TABLE], 0) != AREA_TABLE_ROWS || PyArray_DIM(a[L_TABLE], 1) != e ||
+        PyArray_DIM(a[L_TWO_SIDED], 0) != e || PyArray_DIM(a[L_CDF], 0) != e || PyArray_DIM(a[L_PMF], 0) != e ||
+        PyArray_DIM(a[L_RADIANCE], 0) != CHANNELS || PyArray_DIM(a[L_RADIANCE], 1) != e) {
+        PyErr_Format(PyExc_ValueError, "join_light_samples: table (%d, E) with E >= 1, area, two_sided, cdf and pmf "
+                     "(E,) and radiance (3, E) must agree", AREA_TABLE_ROWS);
+        return NULL;
+    }
+    if (technique != DIFFUSE_COSINE && technique != DIFFUSE_UNIFORM) {
+        PyErr_Format(PyExc_ValueError, "join_light_samples: technique must be %d (cosine) or %d (uniform), got %d",
+                     DIFFUSE_COSINE, DIFFUSE_UNIFORM, technique);
+        return NULL;
+    }
+    npy_intp dims[2] = {CHANNELS, k};
+    PyObject *out[O_COUNT] = {
+        PyArray_SimpleNew(2, dims, NPY_DOUBLE), PyArray_SimpleNew(1, &k, NPY_INT64),
+        PyArray_SimpleNew(2, dims, NPY_FLOAT),  PyArray_SimpleNew(2, dims, NPY_FLOAT),
+        PyArray_SimpleNew(1, &k, NPY_FLOAT),    PyArray_SimpleNew(1, &k, NPY_DOUBLE),
+        PyArray_SimpleNew(1, &k, NPY_DOUBLE),   PyArray_SimpleNew(1, &k, NPY_DOUBLE),
+        PyArray_SimpleNew(1, &k, NPY_DOUBLE),
+    };
+    if (!ps_outputs_allocated(out, O_COUNT))
+        return NULL;
+    double *o[O_COUNT];
+    for (int j = 0; j < O_COUNT; ++j)
+        o[j] = (double *)PyArray_DATA((PyArrayObject *)out[j]);
+    int64_t *entity = (int64_t *)o[O_ENTITY];
+    float *point = (float *)o[O_POINT], *normal = (float *)o[O_NORMAL], *epsilon = (float *)o[O_EPSILON];
+    const int64_t *zs = (const int64_t *)PyArray_DATA(a[L_Z]);
+    const double *u = (const double *)PyArray_DATA(a[L_U]);
+    const npy_bool *diffuse = (const npy_bool *)PyArray_DATA(a[L_DIFFUSE]);
+    const double *reflectance = (const double *)PyArray_DATA(a[L_REFLECTANCE]),
+                 *radiance = (const double *)PyArray_DATA(a[L_RADIANCE]);
+    PsAreaLights lights = {(const float *)PyArray_DATA(a[L_TABLE]), (const double *)PyArray_DATA(a[L_AREA]),
+                           (const double *)PyArray_DATA(a[L_CDF]), (const double *)PyArray_DATA(a[L_PMF]),
+                           (const npy_bool *)PyArray_DATA(a[L_TWO_SIDED]), e};
+    npy_intp v = eye.count, bad = -1;
+    int bad_material = 0;
+    Py_BEGIN_ALLOW_THREADS
+    for (npy_intp j = 0; j < k; ++j) {
+        int64_t l = zs[j]; /* read once: checked, then used */
+        if (l < 0 || l >= v) {
+            bad = j;
+            break;
+        }
+        int64_t mz = eye.material[l];
+        if (mz < 0 || mz >= m || !diffuse[mz]) {
+            bad = j, bad_material = 1;
+            break;
+        }
+        End z;
+        end_at(&eye, l, &z);
+        PsLightSample s; /* LightSet.sample_li: AreaLight.sample_li_selected */
+        ps_sample_area_light(&lights, u[l], u[v + l], u[2 * v + l], z.p, &s);
+        double pdf_bsdf, cos_z = ps_diffuse_eval(technique, z.nf, s.wi, &pdf_bsdf);
+        int lit = s.facing && s.pdf > 0.0;
+        for (int c = 0; c < CHANNELS; ++c) {
+            double f_z = reflectance[c * m + mz] * cos_z;
+            o[O_VALUE][c * k + j] = lit ? eye.beta[c * v + l] * f_z * radiance[c * e + s.entity] / s.pdf : 0.0;
+            point[c * k + j] = s.point[c];
+            normal[c * k + j] = s.normal[c];
+        }
+        entity[j] = s.entity;
+        epsilon[j] = s.epsilon;
+        double dist = (double)s.distance, dist2 = dist * dist;
+        /* LightSet.pdf_le toward z (AreaLight.pdf_le): the pmf times 1 / area, and the emission's density */
+        float back[3] = {-s.wi[0], -s.wi[1], -s.wi[2]};
+        double cos_light = (double)ps_dot3(s.normal, back);
+        double pdf_emit = (lights.two_sided[s.entity] ? fabs(cos_light) * 0.5 : ps_max_zero_double(cos_light)) *
+                          PS_INV_PI;
+        o[O_QS_FWD][j] = lights.pmf[s.entity] * (1.0 / lights.area[s.entity]);
+        o[O_QS_REV][j] = dist2 > 0.0 ? pdf_bsdf * eye.q[l] * cos_at(s.normal, s.wi) / dist2 : 0.0;
+        o[O_PT_REV][j] = dist2 > 0.0 ? pdf_emit * cos_at(z.n, s.wi) / dist2 : 0.0;
+        o[O_PT_MINUS_REV][j] = ps_diffuse_reverse_pdf(technique, z.n, s.wi, z.wo) * eye.q_rev[l] * eye.g_prev[l];
+    }
+    Py_END_ALLOW_THREADS
+    if (bad >= 0) {
+        for (int j = 0; j < O_COUNT; ++j)
+            Py_DECREF(out[j]);
+        if (bad_material)
+            PyErr_Format(PyExc_IndexError, "join_light_samples: z[%zd] has no diffuse material of the table",
+                         (Py_ssize_t)bad);
+        else
+            PyErr_Format(PyExc_IndexError, "join_light_samples: z[%zd] is not a vertex", (Py_ssize_t)bad);
+        return NULL;
+    }
+    return Py_BuildValue("(NNNNNNNNN)", out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7], out[8]);
 }

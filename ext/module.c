@@ -112,6 +112,12 @@ static PyMethodDef module_methods[] = {
      "g_prev, y, z, diffuse, reflectance, technique)\n--\n\n(value (3, K), qs_rev, qs_minus_rev, pt_rev, "
      "pt_minus_rev): light vertices y joined to camera vertices z, the unweighted contributions and the densities "
      "MIS reads (see ext/join.c and pathspace.estimators.join_fused)."},
+    {"join_light_samples", ps_join_light_samples, METH_VARARGS,
+     "join_light_samples(p, n, wo, beta, material, q, q_rev, g_prev, u, z, diffuse, reflectance, table, area, "
+     "two_sided, cdf, pmf, radiance, technique)\n--\n\n(value (3, K), entity, point (3, K), normal (3, K), epsilon, "
+     "qs_fwd, qs_rev, pt_rev, pt_minus_rev): camera vertices z joined to fresh light samples on area lights, the "
+     "unweighted contributions, the light points and the densities MIS reads (see ext/join.c and "
+     "pathspace.estimators.join_fused)."},
     {"take_lanes", ps_take_lanes, METH_VARARGS,
      "take_lanes(indices, arrays)\n--\n\nlist: numpy.take(a, indices, axis=-1) of every array a of the list `arrays` "
      "(lanes along the last axis, as many in each), in one call with the GIL released (see ext/lanes.c)."},

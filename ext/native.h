@@ -112,8 +112,10 @@ PyObject *ps_pt_vertex(PyObject *module, PyObject *args);
 int ps_add_pt_vertex_constants(PyObject *module);
 /* Light vertices joined to a pinhole camera, what they send toward it (lens_connect.c). */
 PyObject *ps_lens_connect(PyObject *module, PyObject *args);
-/* BDPT's joins of light and camera vertices: contributions and MIS densities (join.c). */
+/* BDPT's joins of light and camera vertices, and of camera vertices and light samples: contributions and MIS
+ * densities (join.c). */
 PyObject *ps_join_vertices(PyObject *module, PyObject *args);
+PyObject *ps_join_light_samples(PyObject *module, PyObject *args);
 
 /* The columns `indices` of every per-lane array: a wavefront's compaction; and its inverse, parts of a wavefront
  * placed into one at given columns: subpaths flattened into lane order (lanes.c). */

@@ -11,6 +11,8 @@ import numpy as np
 import pytest
 
 import pathspace as ps
+from pathspace.bsdfs import Diffuse
+from pathspace.estimators.subpaths import FIELDS, SURFACE, Subpaths
 from pathspace.validate import compare_estimates
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -69,6 +71,25 @@ def extreme_normals_and_directions(rng: np.random.Generator, n: int) -> tuple[np
     normal[:, rng.random(n) < 0.02] = 0.0                                   # no normal: cos_at is 1
     normal[:, rng.random(n) < 0.01] = np.nan
     return normal, wo
+
+
+def made_up_side(sc, rng: np.random.Generator, n: int, connect: int, points: np.ndarray | None = None) -> Subpaths:
+    """n one-vertex subpaths of diffuse surface vertices inside the scene's bounds (at ``points`` where given):
+    seen from both sides and edge-on, some with zero or NaN normals or NaN directions back or positions; extreme
+    throughputs, densities and survival probabilities."""
+    low, high = sc.mesh.vertices.min(axis=0), sc.mesh.vertices.max(axis=0)
+    p = rng.uniform(low, high, (n, 3)).T if points is None else points.copy()
+    p[:, rng.random(n) < 0.005] = np.nan
+    normal, wo = extreme_normals_and_directions(rng, n)
+    diffuse = np.flatnonzero([type(m) is Diffuse for m in sc.materials.materials])
+    fields = dict.fromkeys(FIELDS)
+    fields.update(lane=np.arange(n), index=rng.integers(1, 6, n), p=p.astype(np.float32),
+                  n=normal.astype(np.float32), eps=np.full(n, 1e-5, np.float32), wo=wo.astype(np.float32),
+                  beta=extreme(rng, n, 3), delta=np.zeros(n, bool), kind=np.full(n, SURFACE, np.int8),
+                  material=rng.choice(diffuse, n), entity=np.full(n, -1), u=rng.random((connect, n)),
+                  infinite=np.zeros(n, bool),
+                  **{name: extreme(rng, n) for name in ("fwd", "rev", "g_prev", "q", "q_rev")})
+    return Subpaths(offset=np.arange(n + 1), terminated=np.zeros(n, bool), **fields)
 
 
 def extreme_arrivals(mesh, rng: np.random.Generator, n: int):

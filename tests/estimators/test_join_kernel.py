@@ -18,16 +18,14 @@ import pytest
 
 import pathspace as ps
 from pathspace import _native
-from pathspace.bsdfs import Diffuse
 from pathspace.estimators import connections
 from pathspace.estimators.bdpt import BDPT
 from pathspace.estimators.bidirectional import STREAMS
 from pathspace.estimators.connections import Batch, _join
 from pathspace.estimators.join_fused import join_kernel
-from pathspace.estimators.subpaths import FIELDS, SURFACE, Subpaths
 from pathspace.sampler import ReplaySampler
 from pathspace.spectra import RGBColours, SpectralColours
-from conftest import count_lanes, extreme, extreme_normals_and_directions, same_bits
+from conftest import count_lanes, made_up_side, same_bits
 from conftest import repository_scene as scene
 
 DENSITIES = ("qs_fwd", "qs_rev", "qs_minus_rev", "pt_fwd", "pt_rev", "pt_minus_rev")
@@ -35,9 +33,10 @@ DENSITIES = ("qs_fwd", "qs_rev", "qs_minus_rev", "pt_fwd", "pt_rev", "pt_minus_r
 
 @pytest.fixture
 def kernel_calls(monkeypatch):
-    """The numbers of vertex pairs joined and of light vertices joined to the camera by the fused kernels so far
-    (lists of one count each)."""
-    return count_lanes(monkeypatch, "join_vertices", 16), count_lanes(monkeypatch, "lens_connect", 6)
+    """The numbers of vertex pairs joined, of light vertices joined to the camera and of camera vertices joined to
+    light samples by the fused kernels so far (lists of one count each)."""
+    return (count_lanes(monkeypatch, "join_vertices", 16), count_lanes(monkeypatch, "lens_connect", 6),
+            count_lanes(monkeypatch, "join_light_samples", 9))
 
 
 CONFIGS = {
@@ -54,13 +53,13 @@ CONFIGS = {
 @pytest.mark.parametrize("name", ["cornell-box", "cornell-box-specular"])
 def test_fused_bdpt_equals_numpy(name, config, kernel_calls):
     sc = scene(name)
-    joins, lens = kernel_calls
     fused = ps.render(sc, "bdpt", spp=2, seed=5, threads=1, kernel="fused", **CONFIGS[config])
-    counts = joins[0], lens[0]
+    counts = [calls[0] for calls in kernel_calls]
     assert min(counts) > 0
     numpy = ps.render(sc, "bdpt", spp=2, seed=5, threads=1, kernel="numpy", **CONFIGS[config])
-    assert (joins[0], lens[0]) == counts
-    for what in ("subpath vertices", "light and camera vertices joined", "light vertices joined to the camera"):
+    assert [calls[0] for calls in kernel_calls] == counts
+    for what in ("subpath vertices", "light and camera vertices joined", "camera vertices joined to light samples",
+                 "light vertices joined to the camera"):
         assert f"{what} in one C pass (a fused kernel) in RGB, in NumPy when spectral" in fused.stats["plan"]
     assert fused.stats["rays"] == numpy.stats["rays"]
     for field in ("scaled_mean", "scaled_m2", "exponent"):
@@ -72,7 +71,7 @@ def test_fused_bdpt_equals_numpy(name, config, kernel_calls):
 def test_fused_bdpt_equals_numpy_through_glass(name, kernel_calls):
     sc = scene(name, (16, 16))
     fused = ps.render(sc, "bdpt", spp=2, seed=5, threads=1, pyramid=3)
-    assert min(kernel_calls[0][0], kernel_calls[1][0]) > 0
+    assert min(calls[0] for calls in kernel_calls) > 0
     numpy = ps.render(sc, "bdpt", spp=2, seed=5, threads=1, pyramid=3, kernel="numpy")
     same_bits(fused.image, numpy.image)
     assert fused.strategies.keys() == numpy.strategies.keys()
@@ -94,7 +93,7 @@ def test_fused_chosen_strategies_equal_numpy(kernel_calls):
     for kernel in ("fused", "numpy"):   # numbers past the 16 given: the same from a generator of the same seed
         samplers = {name: ReplaySampler(numbers[name].copy(), np.random.default_rng(7)) for name in STREAMS}
         rows[kernel] = BDPT(kernel=kernel).evaluate(sc, pixels, samplers, chosen=(s, t))
-    assert min(kernel_calls[0][0], kernel_calls[1][0]) > 0
+    assert min(calls[0] for calls in kernel_calls) > 0
     fused, numpy = rows["fused"], rows["numpy"]
     assert ((fused.s >= 2) & (fused.t >= 2)).sum() > 100
     for field in ("lane", "s", "t", "unweighted", "weighted", "weight", "pixel", "raster"):
@@ -102,25 +101,6 @@ def test_fused_chosen_strategies_equal_numpy(kernel_calls):
 
 
 # -- joins of made-up vertex pairs ---------------------------------------------------------------------------
-
-def made_up_side(sc, rng: np.random.Generator, n: int, connect: int, points: np.ndarray | None = None) -> Subpaths:
-    """n one-vertex subpaths of diffuse surface vertices inside the scene's bounds (at ``points`` where given):
-    seen from both sides and edge-on, some with zero or NaN normals or NaN directions back or positions; extreme
-    throughputs, densities and survival probabilities."""
-    low, high = sc.mesh.vertices.min(axis=0), sc.mesh.vertices.max(axis=0)
-    p = rng.uniform(low, high, (n, 3)).T if points is None else points.copy()
-    p[:, rng.random(n) < 0.005] = np.nan
-    normal, wo = extreme_normals_and_directions(rng, n)
-    diffuse = np.flatnonzero([type(m) is Diffuse for m in sc.materials.materials])
-    fields = dict.fromkeys(FIELDS)
-    fields.update(lane=np.arange(n), index=rng.integers(1, 6, n), p=p.astype(np.float32),
-                  n=normal.astype(np.float32), eps=np.full(n, 1e-5, np.float32), wo=wo.astype(np.float32),
-                  beta=extreme(rng, n, 3), delta=np.zeros(n, bool), kind=np.full(n, SURFACE, np.int8),
-                  material=rng.choice(diffuse, n), entity=np.full(n, -1), u=rng.random((connect, n)),
-                  infinite=np.zeros(n, bool),
-                  **{name: extreme(rng, n) for name in ("fwd", "rev", "g_prev", "q", "q_rev")})
-    return Subpaths(offset=np.arange(n + 1), terminated=np.zeros(n, bool), **fields)
-
 
 @pytest.mark.parametrize("name, seed", [("cornell-box", 1), ("cornell-box-specular", 2)])
 @pytest.mark.parametrize("occlusion", [True, False])

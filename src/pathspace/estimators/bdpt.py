@@ -71,7 +71,7 @@ from ..spectra import RGBColours
 from . import parameters as p
 from .bidirectional import Bidirectional
 from .connections import Batch, Contributions, emitter_hits, joins, lens_hits, lens_samples, light_samples
-from .join_fused import join_kernel
+from .join_fused import join_kernel, light_sample_kernel
 from .lens_fused import lens_kernel
 from .subpaths import SubpathSettings
 
@@ -128,6 +128,8 @@ class BDPT(Bidirectional):
         options = {"diffuse_sampling": self.diffuse_sampling}
         for what, fused, reason in (("light and camera vertices joined",
                                      *join_kernel(scene, RGBColours, True, options, self.kernel)),
+                                    ("camera vertices joined to light samples",
+                                     *light_sample_kernel(scene, RGBColours, options, self.kernel)),
                                     ("light vertices joined to the camera",
                                      *lens_kernel(scene, RGBColours, options, self.kernel))):
             lines.append(f"{what} in one C pass (a fused kernel) in RGB, in NumPy when spectral" if fused is not None
@@ -137,7 +139,8 @@ class BDPT(Bidirectional):
     def _kernels(self, scene, settings: SubpathSettings) -> dict:
         return {"join_kernel": join_kernel(scene, settings.colours, settings.densities, settings.options,
                                            self.kernel)[0],
-                "lens_kernel": lens_kernel(scene, settings.colours, settings.options, self.kernel)[0]}
+                "lens_kernel": lens_kernel(scene, settings.colours, settings.options, self.kernel)[0],
+                "light_kernel": light_sample_kernel(scene, settings.colours, settings.options, self.kernel)[0]}
 
     def check(self, scene) -> None:
         """Nothing in a scene stops BDPT (strategies a scene makes infeasible get weight 0)."""

@@ -30,7 +30,7 @@ import numpy as np
 from ..bsdfs import MaterialLanes, Surface
 from ..mis import LIGHT_DELTA, Connections
 from ..vecmath import dot
-from .join_fused import JoinKernel
+from .join_fused import LIGHT_SELECTION, JoinKernel, LightSampleKernel
 from .lens_fused import LensKernel
 from .subpaths import LIGHT, SURFACE, LensHits, Subpaths, Vertices, area_density, cos_at, reverse_pdf, to_area
 from .visibility import light_sample_blocked, segment_blocked
@@ -65,6 +65,7 @@ class Batch:
     made: list[Contributions] | None = None  # connections made while the subpaths were walked (light tracing)
     lens_kernel: LensKernel | None = None    # joins light vertices to the camera in C (see estimators.lens_fused)
     join_kernel: JoinKernel | None = None    # joins light and camera vertices in C (see estimators.join_fused)
+    light_kernel: LightSampleKernel | None = None  # joins camera vertices to light samples in C (the same)
 
     def __post_init__(self) -> None:
         self.lane_flags = self.scene.lights.flags.take(self.light.entity.take(self.light.offset[:-1]))
@@ -158,7 +159,9 @@ def light_samples(batch: Batch) -> Contributions | None:
                               & batch.wanted(eye.lane, 1, eye.index + 1)))
     if not z.size:
         return None
-    ls = lights.sample_li(z.p, z.u, batch.colours.take(z.lane), "power", "area")
+    if batch.light_kernel is not None:   # area lights, diffuse vertices: the contributions and densities in C
+        return _light_samples_joined(batch, z)
+    ls = lights.sample_li(z.p, z.u, batch.colours.take(z.lane), LIGHT_SELECTION, "area")
     f_cos, pdf_bsdf = batch.materials(z).eval(_surface(z), ls.wi)
     with np.errstate(divide="ignore", invalid="ignore"):
         value = np.where(ls.facing & (ls.pdf > 0), z.beta * f_cos * ls.value / ls.pdf, 0.0)
@@ -175,12 +178,27 @@ def light_samples(batch: Batch) -> Contributions | None:
     # qs = the light point: its origin density, and the camera walk's density of reaching it from z_{t-1}.
     qs_rev = np.where(infinite, pdf_bsdf * z.q, to_area(pdf_bsdf * z.q, normal, wi, dist2))
     # pt = z_{t-1} as the light walk would reach it: emission toward it, to area (from infinity: disk x |cos|).
-    origin, pdf_emit = lights.pdf_le(entity, normal, -wi)
+    origin, pdf_emit = lights.pdf_le(entity, normal, -wi, LIGHT_SELECTION)
     cos_here = np.abs(dot(z.n, wi)).astype(np.float64)
     pt_rev = np.where(infinite, pdf_emit * cos_here, to_area(pdf_emit, z.n, wi, dist2))
     pt_minus_rev = _at_previous(reverse_pdf(batch.materials(z), z.n, wi, z.wo) * z.q_rev, z)
     return Contributions.make(z.lane, 1, z.index + 1, value, qs_fwd=origin, qs_rev=qs_rev, pt_fwd=z.fwd,
                               pt_rev=pt_rev, pt_minus_rev=pt_minus_rev, flags=lights.flags.take(entity))
+
+
+def _light_samples_joined(batch: Batch, z: Vertices) -> Contributions | None:
+    """:func:`light_samples` of camera vertices ``z`` through ``batch.light_kernel`` (bit for bit the same)."""
+    joined = batch.light_kernel(batch.eye, z.v)
+    useful = batch.useful(joined.value)
+    batch.rays += useful.size
+    useful = useful[~segment_blocked(batch.scene, z.p, z.eps, z.n, joined.point, joined.epsilon, joined.normal,
+                                     useful)]
+    if not useful.size:
+        return None
+    z = z.keep(useful)
+    densities = {name: getattr(joined, name)[useful] for name in ("qs_fwd", "qs_rev", "pt_rev", "pt_minus_rev")}
+    return Contributions.make(z.lane, 1, z.index + 1, np.take(joined.value, useful, axis=1), pt_fwd=z.fwd,
+                              **densities, flags=batch.scene.lights.flags.take(joined.entity[useful]))
 
 
 # -- t = 1 -----------------------------------------------------------------------------------------
@@ -202,7 +220,7 @@ def lens_samples(batch: Batch, light: Subpaths | None = None) -> Contributions |
         we, pdf_lens = camera.importance_of(joined.cos, joined.on_film), joined.pdf
         with np.errstate(divide="ignore", invalid="ignore"):
             value = np.where(joined.on_film & (we > 0) & (pdf_lens > 0), joined.sent * (we / pdf_lens), 0.0)
-        lens, raster = np.broadcast_to(camera.position[:, None], (3, y.size)), joined.raster
+        raster = joined.raster
     else:
         joined = None
         wi, we, pdf_lens, lens, raster, valid = camera.sample_importance(y.p, y.u)
@@ -211,11 +229,15 @@ def lens_samples(batch: Batch, light: Subpaths | None = None) -> Contributions |
             value = np.where(valid & (pdf_lens > 0), y.beta * value * (we / pdf_lens), 0.0)
     useful = batch.useful(value)
     batch.rays += useful.size
-    lens32 = np.take(lens, useful, axis=1).astype(np.float32)
-    axis = np.repeat(camera.forward.astype(np.float32)[:, None], useful.size, axis=1)
+    if joined is not None:   # the pinhole: one lens point
+        lens32 = np.repeat(camera.position.astype(np.float32)[:, None], useful.size, axis=1)
+    else:
+        lens32 = np.take(lens, useful, axis=1).astype(np.float32)
+    axis = (np.zeros((3, useful.size), np.float32) if camera.delta_position
+            else np.repeat(camera.forward.astype(np.float32)[:, None], useful.size, axis=1))
     ys = y.keep(useful)   # gathers only the useful vertices' fields (those y has not gathered yet)
     unblocked = np.flatnonzero(~segment_blocked(scene, ys.p, ys.eps, ys.n, lens32, np.zeros(useful.size, np.float32),
-                                                axis if not camera.delta_position else np.zeros_like(axis)))
+                                                axis))
     useful = useful[unblocked]
     if not useful.size:
         return None

@@ -16,10 +16,11 @@ __all__ = ["segment_blocked", "light_sample_blocked"]
 
 
 def segment_blocked(scene, a: np.ndarray, eps_a: np.ndarray, n_a: np.ndarray, b: np.ndarray, eps_b: np.ndarray,
-                    n_b: np.ndarray) -> np.ndarray:
+                    n_b: np.ndarray, lanes: np.ndarray | None = None) -> np.ndarray:
     """Whether geometry lies between points ``a`` and ``b`` (3, N) float32; ``eps_*`` are the error bounds
-    of the surfaces they lie on (0 off surfaces) and ``n_*`` those surfaces' normals."""
-    return scene.accel.occluded_between(a, n_a, eps_a, b, n_b, eps_b, threads=1)
+    of the surfaces they lie on (0 off surfaces) and ``n_*`` those surfaces' normals; for the segments
+    ``lanes`` (int64 indices, (M,)) only, if given."""
+    return scene.accel.occluded_between(a, n_a, eps_a, b, n_b, eps_b, lanes, threads=1)
 
 
 def light_sample_blocked(scene, p: np.ndarray, eps: np.ndarray, n: np.ndarray, ls, lanes: np.ndarray) -> np.ndarray:
