@@ -178,8 +178,10 @@ class Bidirectional(Estimator):
             _, weighted, pixel, splat = self._weighted(part, batch, item.pixels)
             mine = np.flatnonzero(~splat)
             if mine.size:
+                lane, values = ((part.lane, weighted) if mine.size == part.count
+                                else (part.lane.take(mine), np.take(weighted, mine, axis=1)))
                 for c in range(batch.colours.channels):
-                    own[c] += np.bincount(part.lane[mine], weights=weighted[c, mine], minlength=count)
+                    own[c] += np.bincount(lane, weights=values[c], minlength=count)
             if mine.size < part.count:
                 on = np.flatnonzero(splat)
                 result.splats.append(Splats(lane_pass.take(part.lane[on]), pixel[on],
@@ -261,7 +263,12 @@ class Bidirectional(Estimator):
             batch.nonfinite += int(finite.size - np.count_nonzero(finite))
             weights = np.where(finite, weights, 0.0)
         splat = np.isfinite(part.raster[0])
-        pixel = np.where(splat, batch.scene.camera.pixel_of(part.raster), pixels.take(part.lane))
+        if not splat.any():   # a family of strategies gives only splats (t <= 1) or none
+            pixel = pixels.take(part.lane)
+        elif splat.all():
+            pixel = batch.scene.camera.pixel_of(part.raster)
+        else:
+            pixel = np.where(splat, batch.scene.camera.pixel_of(part.raster), pixels.take(part.lane))
         return weights, part.value * weights[None, :], pixel, splat
 
     def _record_strategies(self, layers: dict, part: Contributions, weighted: np.ndarray, film_pixel, mode,
