@@ -23,6 +23,10 @@
  *     measure (pt_rev: cos / pi, halved for two-sided lights, times |cos_z| / d^2), and z sampling its
  *     predecessor when light arrives from y_0 (pt_minus_rev, times q_rev and g_prev).
  *
+ * join_pairs: the pairs a batch joins (connections.joins), lane by lane in a range of its pairs: lane l's pair
+ * nz_l i + j joins its i-th joinable light vertex and j-th joinable camera vertex, kept if the path has at most
+ * max_depth segments (the NumPy reference is in the tests).
+ *
  * Every value is computed in the operations and order of the NumPy code (which the tests keep as the reference:
  * tests/estimators/test_join_kernel.py and test_light_join_kernel.py), so the contributions and densities are bit
  * for bit the same.  RGB only.
@@ -339,4 +343,129 @@ PyObject *ps_join_light_samples(PyObject *module, PyObject *args)
         return NULL;
     }
     return Py_BuildValue("(NNNNNNNNN)", out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7], out[8]);
+}
+
+
+/* join_pairs' arguments: per lane, where its pairs start (pair_start, lanes + 1), its camera vertices joined
+ * (nz) and where its light and camera vertices start in cy and cz; the vertices that can be joined (indices
+ * into the subpaths); each subpath vertex's index along its subpath. */
+enum { P_PAIR_START, P_NZ, P_Y_START, P_Z_START, P_CY, P_CZ, P_LIGHT_INDEX, P_EYE_INDEX, P_COUNT };
+
+static const PsArraySpec PAIR_SPECS[P_COUNT] = {
+    {"pair_start", NPY_INT64, "int64", 1, 0}, {"nz", NPY_INT64, "int64", 1, 0},
+    {"y_start", NPY_INT64, "int64", 1, 0},    {"z_start", NPY_INT64, "int64", 1, 0},
+    {"cy", NPY_INT64, "int64", 1, 0},         {"cz", NPY_INT64, "int64", 1, 0},
+    {"light_index", NPY_INT64, "int64", 1, 0}, {"eye_index", NPY_INT64, "int64", 1, 0},
+};
+
+/* The first `count` entries of a new 1-D array (a view of it; the array itself if count is its length). */
+static PyObject *first_entries(PyObject *array, npy_intp count)
+{
+    if (count == PyArray_DIM((PyArrayObject *)array, 0))
+        return array;
+    PyObject *start = PyLong_FromSsize_t(0), *stop = PyLong_FromSsize_t((Py_ssize_t)count);
+    PyObject *slice = start && stop ? PySlice_New(start, stop, NULL) : NULL;
+    PyObject *part = slice ? PyObject_GetItem(array, slice) : NULL;
+    Py_XDECREF(start);
+    Py_XDECREF(stop);
+    Py_XDECREF(slice);
+    Py_DECREF(array);
+    return part;
+}
+
+PyObject *ps_join_pairs(PyObject *module, PyObject *args)
+{
+    (void)module;
+    PyObject *objs[P_COUNT];
+    Py_ssize_t begin, end, max_depth;
+    if (!PyArg_ParseTuple(args, "OOOOOOOOnnn:join_pairs", &objs[0], &objs[1], &objs[2], &objs[3], &objs[4], &objs[5],
+                          &objs[6], &objs[7], &begin, &end, &max_depth))
+        return NULL;
+    PyArrayObject *a[P_COUNT];
+    if (ps_checked_arrays(objs, PAIR_SPECS, P_COUNT, (PyObject **)a) < 0)
+        return NULL;
+    npy_intp lanes = PyArray_DIM(a[P_NZ], 0);
+    if (PyArray_DIM(a[P_PAIR_START], 0) != lanes + 1 || PyArray_DIM(a[P_Y_START], 0) != lanes ||
+        PyArray_DIM(a[P_Z_START], 0) != lanes) {
+        PyErr_SetString(PyExc_ValueError, "join_pairs: pair_start (L + 1,), nz, y_start and z_start (L,) must agree");
+        return NULL;
+    }
+    const int64_t *pair_start = (const int64_t *)PyArray_DATA(a[P_PAIR_START]);
+    if (begin < 0 || begin > end || end > pair_start[lanes]) {
+        PyErr_Format(PyExc_ValueError, "join_pairs: the pairs %zd .. %zd are not within 0 .. %lld", begin, end,
+                     (long long)pair_start[lanes]);
+        return NULL;
+    }
+    npy_intp k = end - begin;
+    PyObject *out[2] = {PyArray_SimpleNew(1, &k, NPY_INT64), PyArray_SimpleNew(1, &k, NPY_INT64)};
+    if (!ps_outputs_allocated(out, 2))
+        return NULL;
+    const int64_t *nz = (const int64_t *)PyArray_DATA(a[P_NZ]), *y_start = (const int64_t *)PyArray_DATA(a[P_Y_START]),
+                  *z_start = (const int64_t *)PyArray_DATA(a[P_Z_START]), *cy = (const int64_t *)PyArray_DATA(a[P_CY]),
+                  *cz = (const int64_t *)PyArray_DATA(a[P_CZ]),
+                  *light_index = (const int64_t *)PyArray_DATA(a[P_LIGHT_INDEX]),
+                  *eye_index = (const int64_t *)PyArray_DATA(a[P_EYE_INDEX]);
+    npy_intp ny_c = PyArray_DIM(a[P_CY], 0), nz_c = PyArray_DIM(a[P_CZ], 0);
+    npy_intp nl = PyArray_DIM(a[P_LIGHT_INDEX], 0), ne = PyArray_DIM(a[P_EYE_INDEX], 0);
+    int64_t *ys = (int64_t *)PyArray_DATA((PyArrayObject *)out[0]), *zs = (int64_t *)PyArray_DATA((PyArrayObject *)out[1]);
+    npy_intp count = 0;
+    const char *bad = NULL;
+    npy_intp bad_at = 0;
+    Py_BEGIN_ALLOW_THREADS
+    /* the lane of pair `begin`: the last whose pairs start at or before it (pair_start increases) */
+    npy_intp lo = 0, hi = lanes;
+    while (hi - lo > 1) {
+        npy_intp mid = lo + (hi - lo) / 2;
+        if (pair_start[mid] <= begin)
+            lo = mid;
+        else
+            hi = mid;
+    }
+    for (npy_intp lane = lo, pair = begin; pair < end && lane < lanes; ++lane) {
+        int64_t first = pair_start[lane], last = pair_start[lane + 1], per_y = nz[lane];
+        if (last < first || (last > first && (per_y <= 0 || (last - first) % per_y != 0))) {
+            bad = "pair_start and nz disagree", bad_at = lane;
+            break;
+        }
+        if (pair >= last)
+            continue;
+        /* the lane's pair per_y nth_y + nth_z: its light vertex nth_y and camera vertex nth_z, z fastest */
+        int64_t nth_y = (pair - first) / per_y, nth_z = (pair - first) % per_y;
+        for (; pair < end && pair < last; ++pair) {
+            int64_t iy = y_start[lane] + nth_y, iz = z_start[lane] + nth_z;
+            if (iy < 0 || iy >= ny_c || iz < 0 || iz >= nz_c) {
+                bad = "y_start or z_start is outside cy or cz", bad_at = lane;
+                break;
+            }
+            int64_t y = cy[iy], z = cz[iz];
+            if (y < 0 || y >= nl || z < 0 || z >= ne) {
+                bad = "cy or cz is outside the subpaths", bad_at = lane;
+                break;
+            }
+            if (light_index[y] + eye_index[z] + 1 <= max_depth) { /* s + t - 1 segments */
+                ys[count] = y;
+                zs[count] = z;
+                ++count;
+            }
+            if (++nth_z == per_y)
+                nth_z = 0, ++nth_y;
+        }
+        if (bad)
+            break;
+    }
+    Py_END_ALLOW_THREADS
+    if (bad) {
+        Py_DECREF(out[0]);
+        Py_DECREF(out[1]);
+        PyErr_Format(PyExc_IndexError, "join_pairs: lane %zd: %s", (Py_ssize_t)bad_at, bad);
+        return NULL;
+    }
+    PyObject *y = first_entries(out[0], count), *z = y ? first_entries(out[1], count) : NULL;
+    if (!y || !z) {
+        Py_XDECREF(y);
+        if (!y)
+            Py_DECREF(out[1]);
+        return NULL;
+    }
+    return Py_BuildValue("(NN)", y, z);
 }

@@ -118,6 +118,11 @@ static PyMethodDef module_methods[] = {
      "qs_fwd, qs_rev, pt_rev, pt_minus_rev): camera vertices z joined to fresh light samples on area lights, the "
      "unweighted contributions, the light points and the densities MIS reads (see ext/join.c and "
      "pathspace.estimators.join_fused)."},
+    {"join_pairs", ps_join_pairs, METH_VARARGS,
+     "join_pairs(pair_start, nz, y_start, z_start, cy, cz, light_index, eye_index, begin, end, max_depth)\n--\n\n"
+     "(y, z): the pairs begin .. end - 1 of a batch's joins, lane by lane (lane l's pair nz[l] i + j joins light "
+     "vertex cy[y_start[l] + i] and camera vertex cz[z_start[l] + j]), those of at most max_depth segments (see "
+     "ext/join.c and pathspace.estimators.connections.joins)."},
     {"take_lanes", ps_take_lanes, METH_VARARGS,
      "take_lanes(indices, arrays)\n--\n\nlist: numpy.take(a, indices, axis=-1) of every array a of the list `arrays` "
      "(lanes along the last axis, as many in each), in one call with the GIL released (see ext/lanes.c)."},

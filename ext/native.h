@@ -116,6 +116,8 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args);
  * densities (join.c). */
 PyObject *ps_join_vertices(PyObject *module, PyObject *args);
 PyObject *ps_join_light_samples(PyObject *module, PyObject *args);
+/* The pairs of light and camera vertices BDPT joins, in a range of a batch's pairs (join.c). */
+PyObject *ps_join_pairs(PyObject *module, PyObject *args);
 
 /* The columns `indices` of every per-lane array: a wavefront's compaction; and its inverse, parts of a wavefront
  * placed into one at given columns: subpaths flattened into lane order (lanes.c). */

@@ -100,6 +100,74 @@ def test_fused_chosen_strategies_equal_numpy(kernel_calls):
         same_bits(getattr(fused, field), getattr(numpy, field), field)
 
 
+# -- the pairs joined -----------------------------------------------------------------------------------------
+
+def pairs_numpy(pair_start, nz, y_start, z_start, cy, cz, light_index, eye_index, begin, end, max_depth):
+    """The reference of ``_native.join_pairs``: the pairs begin .. end - 1, enumerated lane by lane in NumPy."""
+    k = np.arange(begin, end)
+    lane = np.searchsorted(pair_start, k, side="right") - 1
+    nth_y, nth_z = np.divmod(k - pair_start[lane], nz[lane])
+    y, z = cy[y_start[lane] + nth_y], cz[z_start[lane] + nth_z]
+    ok = light_index[y] + eye_index[z] + 1 <= max_depth
+    return y[ok], z[ok]
+
+
+def pair_layout(rng: np.random.Generator, lanes: int):
+    """The arguments of join_pairs for ``lanes`` lanes of random subpaths (some lanes without pairs)."""
+    light_length, eye_length = rng.integers(0, 7, lanes), rng.integers(0, 7, lanes)
+    light_index = np.concatenate([np.arange(n) for n in light_length]).astype(np.int64)
+    eye_index = np.concatenate([np.arange(n) for n in eye_length]).astype(np.int64)
+    light_lane, eye_lane = np.repeat(np.arange(lanes), light_length), np.repeat(np.arange(lanes), eye_length)
+    cy = np.flatnonzero((light_index >= 1) & (rng.random(light_index.size) < 0.8))   # joinable vertices
+    cz = np.flatnonzero((eye_index >= 1) & (rng.random(eye_index.size) < 0.8))
+    ny, nz = np.bincount(light_lane[cy], minlength=lanes), np.bincount(eye_lane[cz], minlength=lanes)
+    pair_start = np.concatenate([[0], np.cumsum(ny * nz)])
+    y_start, z_start = np.concatenate([[0], np.cumsum(ny)[:-1]]), np.concatenate([[0], np.cumsum(nz)[:-1]])
+    return [pair_start, nz, y_start, z_start, cy, cz, light_index, eye_index]
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("max_depth", [3, 6, 100])
+def test_join_pairs_equal_numpy(seed, max_depth):
+    """Every range of pairs: whole, from and to the middle of a lane, within one lane, empty; a depth limit that
+    leaves out some pairs, and one that keeps all."""
+    rng = np.random.default_rng(seed)
+    layout = pair_layout(rng, 500)
+    total = int(layout[0][-1])
+    assert total > 1000
+    cuts = sorted(rng.integers(0, total, 6).tolist())
+    for begin, end in [(0, total), (cuts[0], cuts[3]), (cuts[1], cuts[2]), (cuts[4], cuts[4]), (cuts[5], total),
+                       (0, 1), (total - 1, total)]:
+        y, z = _native.join_pairs(*layout, begin, end, max_depth)
+        y_ref, z_ref = pairs_numpy(*layout, begin, end, max_depth)
+        same_bits(y, y_ref, f"y {begin}..{end}")
+        same_bits(z, z_ref, f"z {begin}..{end}")
+    kept = _native.join_pairs(*layout, 0, total, max_depth)[0].size
+    assert (kept < total) == (max_depth < 11)   # subpath indices below 6: s + t - 1 <= 11
+
+
+@pytest.mark.parametrize("position, value, error, match", [
+    (0, np.array([0, 1]), ValueError, r"pair_start \(L \+ 1,\), nz, y_start and z_start \(L,\) must agree"),
+    (2, np.zeros(3, np.int64), ValueError, "must agree"),
+    (1, np.array([0, 0], np.int64), IndexError, "lane 0: pair_start and nz disagree"),
+    (1, np.array([4, 2], np.int64), IndexError, "lane 0: pair_start and nz disagree"),
+    (2, np.array([5, 0], np.int64), IndexError, "lane 0: y_start or z_start is outside cy or cz"),
+    (5, np.array([0, 1, 9, 3], np.int64), IndexError, "cy or cz is outside the subpaths"),
+    (4, np.array([-1, 1, 2], np.int64), IndexError, "lane 0: cy or cz is outside the subpaths"),
+    (8, 11, ValueError, r"the pairs 11 \.\. 10 are not within 0 \.\. 10"),
+    (9, 11, ValueError, r"the pairs 0 \.\. 11 are not within 0 \.\. 10"),
+    (8, -1, ValueError, "are not within"),
+    (0, np.array([0, 6, 10], np.int32), TypeError, "pair_start"),
+])
+def test_join_pairs_refuses_bad_arguments(position, value, error, match):
+    # two lanes: 3 light x 2 camera vertices and 2 x 2
+    args = [np.array([0, 6, 10]), np.array([2, 2]), np.array([0, 3]), np.array([0, 2]), np.arange(5),
+            np.arange(4), np.ones(5, np.int64), np.ones(4, np.int64), 0, 10, 100]
+    args[position] = value
+    with pytest.raises(error, match=match):
+        _native.join_pairs(*args)
+
+
 # -- joins of made-up vertex pairs ---------------------------------------------------------------------------
 
 @pytest.mark.parametrize("name, seed", [("cornell-box", 1), ("cornell-box-specular", 2)])

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import _native
 from ..bsdfs import MaterialLanes, Surface
 from ..mis import LIGHT_DELTA, Connections
 from ..vecmath import dot
@@ -345,19 +346,10 @@ def joins(batch: Batch):
     for first, last in zip(batch.units[:-1], batch.units[1:]):
         for begin in range(int(pair_start[first]), int(pair_start[last]), CHUNK):
             end = min(begin + CHUNK, int(pair_start[last]))
-            k = np.arange(begin, end)
-            # The lanes of pairs begin .. end - 1: lanes first .. stop - 1 have some, as many as their pair range
-            # overlaps the chunk's (lanes without pairs: none).
-            start = int(np.searchsorted(pair_start, begin, side="right")) - 1
-            stop = int(np.searchsorted(pair_start, end - 1, side="right"))
-            lane = np.repeat(np.arange(start, stop), np.diff(np.clip(pair_start[start:stop + 1], begin, end)))
-            nth_y, nth_z = np.divmod(k - pair_start.take(lane), nz.take(lane))   # the lane's pair nz nth_y + nth_z
-            y = cy.take(y_start.take(lane) + nth_y)
-            z = cz.take(z_start.take(lane) + nth_z)
-            s, t = light.index.take(y) + 1, eye.index.take(z) + 1
-            ok = s + t - 1 <= batch.max_depth
-            if not ok.all():
-                y, z = y[ok], z[ok]
+            # Lane l's pair nz[l] i + j joins its light vertex cy[y_start[l] + i] and camera vertex
+            # cz[z_start[l] + j]; those of s + t - 1 <= max_depth segments (one C pass).
+            y, z = _native.join_pairs(pair_start, nz, y_start, z_start, cy, cz, light.index, eye.index, begin, end,
+                                      batch.max_depth)
             if y.size:
                 part = _join(batch, light.at(y), eye.at(z))
                 if part is not None:
