@@ -44,6 +44,10 @@
 
 #define CHANNELS 3
 
+/* Pairs (or vertices) per block: the kernels take each block in two stages, so that the long chains of divisions
+ * and square roots of several pairs overlap (as ext/pt_vertex.c does). */
+#define JOIN_BLOCK 64
+
 /* The fields of one kind of subpath the join reads, in argument order (pathspace.estimators.subpaths). */
 enum { F_P, F_N, F_WO, F_BETA, F_MATERIAL, F_Q, F_Q_REV, F_G_PREV, F_COUNT };
 enum { A_LIGHT = 0, A_EYE = F_COUNT, A_Y = 2 * F_COUNT, A_Z, A_DIFFUSE, A_REFLECTANCE, A_COUNT };
@@ -160,43 +164,59 @@ PyObject *ps_join_vertices(PyObject *module, PyObject *args)
     npy_intp bad = -1;
     enum { BAD_Y, BAD_Z, BAD_MATERIAL } why = BAD_Y;
     Py_BEGIN_ALLOW_THREADS
-    for (npy_intp j = 0; j < k; ++j) {
-        int64_t i = ys[j], l = zs[j]; /* every index is read once: checked, then used */
-        if (i < 0 || i >= light.count || l < 0 || l >= eye.count) {
-            bad = j, why = i < 0 || i >= light.count ? BAD_Y : BAD_Z;
+    /* In blocks: the ends and the direction between them of a block's pairs, then the rest (see JOIN_BLOCK). */
+    for (npy_intp first = 0; first < k && bad < 0; first += JOIN_BLOCK) {
+        npy_intp stop = first + JOIN_BLOCK < k ? first + JOIN_BLOCK : k;
+        int64_t ib[JOIN_BLOCK], lb[JOIN_BLOCK], myb[JOIN_BLOCK], mzb[JOIN_BLOCK];
+        End yb[JOIN_BLOCK], zb[JOIN_BLOCK];
+        double dist2b[JOIN_BLOCK];
+        float wb[JOIN_BLOCK][3];
+        for (npy_intp j = first; j < stop; ++j) {
+            int64_t i = ys[j], l = zs[j]; /* every index is read once: checked, then used */
+            if (i < 0 || i >= light.count || l < 0 || l >= eye.count) {
+                bad = j, why = i < 0 || i >= light.count ? BAD_Y : BAD_Z;
+                break;
+            }
+            int64_t my = light.material[i], mz = eye.material[l];
+            if (my < 0 || my >= m || !diffuse[my] || mz < 0 || mz >= m || !diffuse[mz]) {
+                bad = j, why = BAD_MATERIAL;
+                break;
+            }
+            npy_intp b = j - first;
+            ib[b] = i, lb[b] = l, myb[b] = my, mzb[b] = mz;
+            end_at(&light, i, yb + b);
+            end_at(&eye, l, zb + b);
+            double d[3];
+            for (int c = 0; c < 3; ++c)
+                d[c] = (double)zb[b].p[c] - (double)yb[b].p[c];
+            double dist2 = (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2], dist = sqrt(dist2);
+            for (int c = 0; c < 3; ++c) /* y -> z */
+                wb[b][c] = (float)(d[c] / dist);
+            dist2b[b] = dist2;
+        }
+        if (bad >= 0)
             break;
+        for (npy_intp j = first; j < stop; ++j) {
+            npy_intp b = j - first;
+            int64_t i = ib[b], l = lb[b], my = myb[b], mz = mzb[b];
+            const End *y = yb + b, *z = zb + b;
+            const float *w = wb[b];
+            float back[3] = {-w[0], -w[1], -w[2]}; /* z -> y */
+            double dist2 = dist2b[b], pdf_y, pdf_z;
+            double cos_y = ps_diffuse_eval(technique, y->nf, w, &pdf_y);
+            double cos_z = ps_diffuse_eval(technique, z->nf, back, &pdf_z);
+            int apart = dist2 > 0.0;
+            for (int c = 0; c < CHANNELS; ++c) {
+                double f_y = reflectance[c * m + my] * cos_y, f_z = reflectance[c * m + mz] * cos_z;
+                double beta_y = light.beta[c * light.count + i], beta_z = eye.beta[c * eye.count + l];
+                value[c * k + j] = apart ? beta_y * f_y * f_z * beta_z / dist2 : 0.0;
+            }
+            qs_rev[j] = apart ? pdf_z * eye.q[l] * cos_at(y->n, w) / dist2 : 0.0;
+            pt_rev[j] = apart ? pdf_y * light.q[i] * cos_at(z->n, w) / dist2 : 0.0;
+            /* each end sampling its predecessor, light arriving from the other end */
+            qs_minus_rev[j] = ps_diffuse_reverse_pdf(technique, y->n, w, y->wo) * light.q_rev[i] * light.g_prev[i];
+            pt_minus_rev[j] = ps_diffuse_reverse_pdf(technique, z->n, back, z->wo) * eye.q_rev[l] * eye.g_prev[l];
         }
-        int64_t my = light.material[i], mz = eye.material[l];
-        if (my < 0 || my >= m || !diffuse[my] || mz < 0 || mz >= m || !diffuse[mz]) {
-            bad = j, why = BAD_MATERIAL;
-            break;
-        }
-        End y, z;
-        end_at(&light, i, &y);
-        end_at(&eye, l, &z);
-        double d[3];
-        for (int c = 0; c < 3; ++c)
-            d[c] = (double)z.p[c] - (double)y.p[c];
-        double dist2 = (d[0] * d[0] + d[1] * d[1]) + d[2] * d[2], dist = sqrt(dist2);
-        float w[3], back[3]; /* y -> z and z -> y */
-        for (int c = 0; c < 3; ++c) {
-            w[c] = (float)(d[c] / dist);
-            back[c] = -w[c];
-        }
-        double pdf_y, pdf_z;
-        double cos_y = ps_diffuse_eval(technique, y.nf, w, &pdf_y);
-        double cos_z = ps_diffuse_eval(technique, z.nf, back, &pdf_z);
-        int apart = dist2 > 0.0;
-        for (int c = 0; c < CHANNELS; ++c) {
-            double f_y = reflectance[c * m + my] * cos_y, f_z = reflectance[c * m + mz] * cos_z;
-            double beta_y = light.beta[c * light.count + i], beta_z = eye.beta[c * eye.count + l];
-            value[c * k + j] = apart ? beta_y * f_y * f_z * beta_z / dist2 : 0.0;
-        }
-        qs_rev[j] = apart ? pdf_z * eye.q[l] * cos_at(y.n, w) / dist2 : 0.0;
-        pt_rev[j] = apart ? pdf_y * light.q[i] * cos_at(z.n, w) / dist2 : 0.0;
-        /* each end sampling its predecessor, light arriving from the other end */
-        qs_minus_rev[j] = ps_diffuse_reverse_pdf(technique, y.n, w, y.wo) * light.q_rev[i] * light.g_prev[i];
-        pt_minus_rev[j] = ps_diffuse_reverse_pdf(technique, z.n, back, z.wo) * eye.q_rev[l] * eye.g_prev[l];
     }
     Py_END_ALLOW_THREADS
     if (bad >= 0) {
@@ -295,41 +315,56 @@ PyObject *ps_join_light_samples(PyObject *module, PyObject *args)
     npy_intp v = eye.count, bad = -1;
     int bad_material = 0;
     Py_BEGIN_ALLOW_THREADS
-    for (npy_intp j = 0; j < k; ++j) {
-        int64_t l = zs[j]; /* read once: checked, then used */
-        if (l < 0 || l >= v) {
-            bad = j;
+    /* In blocks: the light samples of a block's vertices, then their evaluation (see JOIN_BLOCK). */
+    for (npy_intp first = 0; first < k && bad < 0; first += JOIN_BLOCK) {
+        npy_intp stop = first + JOIN_BLOCK < k ? first + JOIN_BLOCK : k;
+        int64_t lb[JOIN_BLOCK], mb[JOIN_BLOCK];
+        End zb[JOIN_BLOCK];
+        PsLightSample sb[JOIN_BLOCK];
+        for (npy_intp j = first; j < stop; ++j) {
+            int64_t l = zs[j]; /* read once: checked, then used */
+            if (l < 0 || l >= v) {
+                bad = j;
+                break;
+            }
+            int64_t mz = eye.material[l];
+            if (mz < 0 || mz >= m || !diffuse[mz]) {
+                bad = j, bad_material = 1;
+                break;
+            }
+            lb[j - first] = l, mb[j - first] = mz;
+            end_at(&eye, l, zb + (j - first));
+            /* LightSet.sample_li: AreaLight.sample_li_selected */
+            ps_sample_area_light(&lights, u[l], u[v + l], u[2 * v + l], zb[j - first].p, sb + (j - first));
+        }
+        if (bad >= 0)
             break;
+        for (npy_intp j = first; j < stop; ++j) {
+            int64_t l = lb[j - first], mz = mb[j - first];
+            const End *z = zb + (j - first);
+            const PsLightSample *s = sb + (j - first);
+            double pdf_bsdf, cos_z = ps_diffuse_eval(technique, z->nf, s->wi, &pdf_bsdf);
+            int lit = s->facing && s->pdf > 0.0;
+            for (int c = 0; c < CHANNELS; ++c) {
+                double f_z = reflectance[c * m + mz] * cos_z;
+                o[O_VALUE][c * k + j] = lit ? eye.beta[c * v + l] * f_z * radiance[c * e + s->entity] / s->pdf : 0.0;
+                point[c * k + j] = s->point[c];
+                normal[c * k + j] = s->normal[c];
+            }
+            entity[j] = s->entity;
+            epsilon[j] = s->epsilon;
+            double dist = (double)s->distance, dist2 = dist * dist;
+            /* LightSet.pdf_le toward z (AreaLight.pdf_le): the pmf times 1 / area, and the emission's density */
+            float back[3] = {-s->wi[0], -s->wi[1], -s->wi[2]};
+            double cos_light = (double)ps_dot3(s->normal, back);
+            double pdf_emit = (lights.two_sided[s->entity] ? fabs(cos_light) * 0.5 : ps_max_zero_double(cos_light)) *
+                              PS_INV_PI;
+            o[O_QS_FWD][j] = lights.pmf[s->entity] * (1.0 / lights.area[s->entity]);
+            o[O_QS_REV][j] = dist2 > 0.0 ? pdf_bsdf * eye.q[l] * cos_at(s->normal, s->wi) / dist2 : 0.0;
+            o[O_PT_REV][j] = dist2 > 0.0 ? pdf_emit * cos_at(z->n, s->wi) / dist2 : 0.0;
+            o[O_PT_MINUS_REV][j] = ps_diffuse_reverse_pdf(technique, z->n, s->wi, z->wo) * eye.q_rev[l] *
+                                   eye.g_prev[l];
         }
-        int64_t mz = eye.material[l];
-        if (mz < 0 || mz >= m || !diffuse[mz]) {
-            bad = j, bad_material = 1;
-            break;
-        }
-        End z;
-        end_at(&eye, l, &z);
-        PsLightSample s; /* LightSet.sample_li: AreaLight.sample_li_selected */
-        ps_sample_area_light(&lights, u[l], u[v + l], u[2 * v + l], z.p, &s);
-        double pdf_bsdf, cos_z = ps_diffuse_eval(technique, z.nf, s.wi, &pdf_bsdf);
-        int lit = s.facing && s.pdf > 0.0;
-        for (int c = 0; c < CHANNELS; ++c) {
-            double f_z = reflectance[c * m + mz] * cos_z;
-            o[O_VALUE][c * k + j] = lit ? eye.beta[c * v + l] * f_z * radiance[c * e + s.entity] / s.pdf : 0.0;
-            point[c * k + j] = s.point[c];
-            normal[c * k + j] = s.normal[c];
-        }
-        entity[j] = s.entity;
-        epsilon[j] = s.epsilon;
-        double dist = (double)s.distance, dist2 = dist * dist;
-        /* LightSet.pdf_le toward z (AreaLight.pdf_le): the pmf times 1 / area, and the emission's density */
-        float back[3] = {-s.wi[0], -s.wi[1], -s.wi[2]};
-        double cos_light = (double)ps_dot3(s.normal, back);
-        double pdf_emit = (lights.two_sided[s.entity] ? fabs(cos_light) * 0.5 : ps_max_zero_double(cos_light)) *
-                          PS_INV_PI;
-        o[O_QS_FWD][j] = lights.pmf[s.entity] * (1.0 / lights.area[s.entity]);
-        o[O_QS_REV][j] = dist2 > 0.0 ? pdf_bsdf * eye.q[l] * cos_at(s.normal, s.wi) / dist2 : 0.0;
-        o[O_PT_REV][j] = dist2 > 0.0 ? pdf_emit * cos_at(z.n, s.wi) / dist2 : 0.0;
-        o[O_PT_MINUS_REV][j] = ps_diffuse_reverse_pdf(technique, z.n, s.wi, z.wo) * eye.q_rev[l] * eye.g_prev[l];
     }
     Py_END_ALLOW_THREADS
     if (bad >= 0) {
