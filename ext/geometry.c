@@ -132,3 +132,17 @@ PyObject *ps_hit_geometry(PyObject *module, PyObject *args)
     }
     return Py_BuildValue("(NNN)", p, normal, eps);
 }
+
+PyObject *ps_first_entries(PyObject *array, Py_ssize_t count)
+{
+    if (count == PyArray_DIM((PyArrayObject *)array, 0))
+        return array;
+    PyObject *start = PyLong_FromSsize_t(0), *stop = PyLong_FromSsize_t((Py_ssize_t)count);
+    PyObject *slice = start && stop ? PySlice_New(start, stop, NULL) : NULL;
+    PyObject *part = slice ? PyObject_GetItem(array, slice) : NULL;
+    Py_XDECREF(start);
+    Py_XDECREF(stop);
+    Py_XDECREF(slice);
+    Py_DECREF(array);
+    return part;
+}

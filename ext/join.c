@@ -393,21 +393,6 @@ static const PsArraySpec PAIR_SPECS[P_COUNT] = {
     {"light_index", NPY_INT64, "int64", 1, 0}, {"eye_index", NPY_INT64, "int64", 1, 0},
 };
 
-/* The first `count` entries of a new 1-D array (a view of it; the array itself if count is its length). */
-static PyObject *first_entries(PyObject *array, npy_intp count)
-{
-    if (count == PyArray_DIM((PyArrayObject *)array, 0))
-        return array;
-    PyObject *start = PyLong_FromSsize_t(0), *stop = PyLong_FromSsize_t((Py_ssize_t)count);
-    PyObject *slice = start && stop ? PySlice_New(start, stop, NULL) : NULL;
-    PyObject *part = slice ? PyObject_GetItem(array, slice) : NULL;
-    Py_XDECREF(start);
-    Py_XDECREF(stop);
-    Py_XDECREF(slice);
-    Py_DECREF(array);
-    return part;
-}
-
 PyObject *ps_join_pairs(PyObject *module, PyObject *args)
 {
     (void)module;
@@ -495,7 +480,7 @@ PyObject *ps_join_pairs(PyObject *module, PyObject *args)
         PyErr_Format(PyExc_IndexError, "join_pairs: lane %zd: %s", (Py_ssize_t)bad_at, bad);
         return NULL;
     }
-    PyObject *y = first_entries(out[0], count), *z = y ? first_entries(out[1], count) : NULL;
+    PyObject *y = ps_first_entries(out[0], count), *z = y ? ps_first_entries(out[1], count) : NULL;
     if (!y || !z) {
         Py_XDECREF(y);
         if (!y)

@@ -6,7 +6,8 @@
  * NumPy's own take.  The indices (0 .. N - 1; no negative ones) are copied and checked once, so an array changed
  * by another thread during the call cannot send the reads out of bounds.  (Checking each index where it is read
  * instead, without the copy, made one-row gathers 1.7x faster but the compaction of a walk's dozen arrays 1.1x
- * slower.)  place_lanes, below, is the inverse.
+ * slower.)  place_lanes, below, is the inverse.  useful_lanes finds the lanes of a wavefront's contributions worth
+ * weighting (finite and not zero), in one pass instead of NumPy's five.
  */
 #include "native.h"
 
@@ -15,6 +16,7 @@
 #define PY_ARRAY_UNIQUE_SYMBOL pathspace_native_ARRAY_API
 #include <numpy/arrayobject.h>
 
+#include <math.h>
 #include <stdint.h>
 #include <stdlib.h>
 #include <string.h>
@@ -374,4 +376,40 @@ done:
     PyMem_Free(positions);
     PyMem_Free(seen);
     return out;
+}
+
+/* The lanes (columns) of a wavefront's contributions worth weighting (pathspace.estimators.connections.Batch.useful):
+ * those whose values are finite in every row and not zero in some, in increasing order; and how many lanes hold
+ * a NaN or an infinity. */
+PyObject *ps_useful_lanes(PyObject *module, PyObject *args)
+{
+    (void)module;
+    PyObject *obj;
+    if (!PyArg_ParseTuple(args, "O:useful_lanes", &obj))
+        return NULL;
+    PyArrayObject *value = (PyArrayObject *)ps_checked_array(obj, "value", NPY_DOUBLE, -1, "float64", 2);
+    if (!value)
+        return NULL;
+    npy_intp rows = PyArray_DIM(value, 0), n = PyArray_DIM(value, 1);
+    PyObject *out = PyArray_SimpleNew(1, &n, NPY_INT64);
+    if (!out)
+        return NULL;
+    const double *v = (const double *)PyArray_DATA(value);
+    int64_t *lanes = (int64_t *)PyArray_DATA((PyArrayObject *)out);
+    npy_intp count = 0, nonfinite = 0;
+    Py_BEGIN_ALLOW_THREADS
+    for (npy_intp i = 0; i < n; ++i) {
+        int finite = 1, nonzero = 0;
+        for (npy_intp r = 0; r < rows; ++r) {
+            double x = v[r * n + i];
+            finite &= isfinite(x) != 0;
+            nonzero |= x != 0.0;
+        }
+        nonfinite += !finite;
+        lanes[count] = i;
+        count += finite && nonzero;
+    }
+    Py_END_ALLOW_THREADS
+    PyObject *useful = ps_first_entries(out, count);
+    return useful ? Py_BuildValue("(Nn)", useful, (Py_ssize_t)nonfinite) : NULL;
 }

@@ -123,6 +123,10 @@ static PyMethodDef module_methods[] = {
      "(y, z): the pairs begin .. end - 1 of a batch's joins, lane by lane (lane l's pair nz[l] i + j joins light "
      "vertex cy[y_start[l] + i] and camera vertex cz[z_start[l] + j]), those of at most max_depth segments (see "
      "ext/join.c and pathspace.estimators.connections.joins)."},
+    {"useful_lanes", ps_useful_lanes, METH_VARARGS,
+     "useful_lanes(value)\n--\n\n(lanes, nonfinite): the columns of `value` (C, n) float64, C-contiguous, finite in "
+     "every row and not zero in some, in increasing order, and how many columns hold a NaN or an infinity (see "
+     "ext/lanes.c)."},
     {"take_lanes", ps_take_lanes, METH_VARARGS,
      "take_lanes(indices, arrays)\n--\n\nlist: numpy.take(a, indices, axis=-1) of every array a of the list `arrays` "
      "(lanes along the last axis, as many in each), in one call with the GIL released (see ext/lanes.c)."},

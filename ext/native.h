@@ -57,6 +57,10 @@ int ps_checked_arrays(PyObject *const *objs, const PsArraySpec *specs, int count
  * TypeError or ValueError naming `name` (geometry.c). */
 PyObject *ps_rows_array(PyObject *obj, const char *name, int type, const char *type_name, Py_ssize_t rows);
 
+/* The first `count` entries of `array`, a new 1-D array whose reference this takes: a view of them (the array
+ * itself if count is its length); NULL with the exception set if the view cannot be made (geometry.c). */
+PyObject *ps_first_entries(PyObject *array, Py_ssize_t count);
+
 /* 1 if every one of `count` newly allocated outputs exists; else releases them all and returns 0 (the failed
  * allocation has set the exception). */
 static inline int ps_outputs_allocated(PyObject **out, int count)
@@ -120,9 +124,11 @@ PyObject *ps_join_light_samples(PyObject *module, PyObject *args);
 PyObject *ps_join_pairs(PyObject *module, PyObject *args);
 
 /* The columns `indices` of every per-lane array: a wavefront's compaction; and its inverse, parts of a wavefront
- * placed into one at given columns: subpaths flattened into lane order (lanes.c). */
+ * placed into one at given columns: subpaths flattened into lane order; the lanes of contributions worth weighting
+ * (lanes.c). */
 PyObject *ps_take_lanes(PyObject *module, PyObject *args);
 PyObject *ps_place_lanes(PyObject *module, PyObject *args);
+PyObject *ps_useful_lanes(PyObject *module, PyObject *args);
 
 /* Cosine-weighted directions about unit normals (warp.c). */
 PyObject *ps_cosine_about(PyObject *module, PyObject *args);

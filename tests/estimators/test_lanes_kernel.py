@@ -6,7 +6,8 @@ int64, float32, float64, complex), one and two dimensions, arrays the loop does 
 three dimensions, objects, byte-swapped: NumPy's take does those), repeated and empty index lists; then its
 refusals.  Its inverse ``place_lanes`` (subpaths recorded depth by depth, flattened into lane order) against
 NumPy's concatenation and fancy assignment: parts laid out as subpaths lay them (the kernel's windowed loop) and
-permuted (its plain loop), mixed types and layouts of one field, then its refusals.
+permuted (its plain loop), mixed types and layouts of one field, then its refusals.  Last, ``useful_lanes`` (the
+contributions worth weighting) against the NumPy expression it replaces, on extreme values.
 """
 from __future__ import annotations
 
@@ -180,3 +181,48 @@ def test_place_lanes_refuses_bad_arguments():
     with pytest.raises(TypeError, match=r"positions\[p\] must be a 1D int64"):
         _native.place_lanes([np.array([0, 2, 4], np.int32), two[1]], [[a], [b]], 5)
     assert _native.place_lanes(two, [[], []], 5) == []
+
+
+# -- useful_lanes ---------------------------------------------------------------------------------------------
+
+def reference_useful(value: np.ndarray) -> tuple[np.ndarray, int]:
+    """The NumPy code useful_lanes stands for: the columns finite in every row and not zero in some, and how
+    many columns are not finite."""
+    finite = np.isfinite(value).all(axis=0)
+    return np.flatnonzero((value != 0).any(axis=0) & finite), int(finite.size - np.count_nonzero(finite))
+
+
+@pytest.mark.parametrize("rows", [1, 3, 4])
+def test_useful_lanes_equal_numpy(rows):
+    """Values over 300 decades with zeros, negative zeros, infinities and NaNs, alone or beside finite values in
+    a column; subnormals; columns of zeros."""
+    rng = np.random.default_rng(rows)
+    n = 5000
+    value = 10.0 ** rng.uniform(-310, 300, (rows, n)) * rng.choice([-1.0, 1.0], (rows, n))
+    for x, share in ((0.0, 0.3), (-0.0, 0.1), (np.inf, 0.01), (-np.inf, 0.01), (np.nan, 0.01)):
+        value[rng.random((rows, n)) < share] = x
+    value[:, rng.random(n) < 0.1] = 0.0
+    lanes, nonfinite = _native.useful_lanes(value)
+    expected, expected_nonfinite = reference_useful(value)
+    np.testing.assert_array_equal(lanes, expected)
+    assert lanes.dtype == np.int64 and nonfinite == expected_nonfinite
+    assert 0 < lanes.size < n and nonfinite > 0 and (value[:, lanes] != 0).any(axis=0).all()
+
+
+def test_useful_lanes_of_no_lanes_and_of_all():
+    lanes, nonfinite = _native.useful_lanes(np.zeros((3, 0)))
+    assert lanes.shape == (0,) and nonfinite == 0
+    lanes, nonfinite = _native.useful_lanes(np.ones((3, 7)))
+    np.testing.assert_array_equal(lanes, np.arange(7))
+    assert nonfinite == 0
+
+
+@pytest.mark.parametrize("value, error, match", [
+    (np.ones((3, 4), np.float32), TypeError, "value"),
+    (np.ones(4), TypeError, "value must be a 2D float64 array"),
+    (np.ones((4, 3)).T, ValueError, "value"),
+    ([[1.0, 2.0]], TypeError, "value"),
+])
+def test_useful_lanes_refuses_bad_arguments(value, error, match):
+    with pytest.raises(error, match=match):
+        _native.useful_lanes(value)
