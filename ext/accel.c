@@ -569,16 +569,16 @@ static PyObject *Accel_occluded(PsAccel *self, PyObject *args, PyObject *kwargs)
 
 static PyObject *Accel_occluded_between(PsAccel *self, PyObject *args, PyObject *kwargs)
 {
-    static char *kwlist[] = {"a", "n_a", "eps_a", "b", "n_b", "eps_b", "lanes", "threads", NULL};
-    PyObject *arrays[6], *lanes = Py_None;
+    static char *kwlist[] = {"a", "n_a", "eps_a", "b", "n_b", "eps_b", "lanes", "b_lanes", "threads", NULL};
+    PyObject *arrays[6], *lanes = Py_None, *b_lanes = Py_None;
     int threads = 0;
-    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOO|O$i:occluded_between", kwlist, &arrays[0], &arrays[1],
-                                     &arrays[2], &arrays[3], &arrays[4], &arrays[5], &lanes, &threads))
+    if (!PyArg_ParseTupleAndKeywords(args, kwargs, "OOOOOO|OO$i:occluded_between", kwlist, &arrays[0], &arrays[1],
+                                     &arrays[2], &arrays[3], &arrays[4], &arrays[5], &lanes, &b_lanes, &threads))
         return NULL;
     Segments seg;
     Query q;
     memset(&q, 0, sizeof(q));
-    if (ps_parse_segments(arrays, lanes, &seg) < 0 || start_query(self, &q, &threads, 1) < 0)
+    if (ps_parse_segments(arrays, lanes, b_lanes, &seg) < 0 || start_query(self, &q, &threads, 1) < 0)
         return NULL;
     q.segments = &seg;
     q.n = seg.count;
@@ -773,11 +773,12 @@ static PyMethodDef Accel_methods[] = {
      "occluded(origins, directions, tmin=0.0, tmax=inf, *, threads=0)\n--\n\n"
      "True where some triangle lies on the ray between tmin and tmax.  Returns a bool array (N,)."},
     {"occluded_between", (PyCFunction)(void (*)(void))Accel_occluded_between, METH_VARARGS | METH_KEYWORDS,
-     "occluded_between(a, n_a, eps_a, b, n_b, eps_b, lanes=None, *, threads=0)\n--\n\n"
+     "occluded_between(a, n_a, eps_a, b, n_b, eps_b, lanes=None, b_lanes=None, *, threads=0)\n--\n\n"
      "True where some triangle lies between surface points a and b: (3, N) float32 points and unit normals,\n"
      "(N,) float32 error bounds, tested along the shadow ray pathspace.vecmath.shadow_ray makes (bit for bit),\n"
-     "from tmin = RAY_TMIN.  lanes: int64 (M,) indices of the segments to test (default: all N).  Returns a\n"
-     "bool array (M,) or (N,)."},
+     "from tmin = RAY_TMIN.  lanes: int64 (M,) indices of the segments to test (default: all N); b_lanes: int64\n"
+     "(M,) indices into b, n_b and eps_b, which may then be N_b wide (default: lanes).  Returns a bool array\n"
+     "(M,) or (N,)."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -53,7 +53,8 @@ static PyMethodDef module_methods[] = {
      "ray offsets (N,), float32, of hits on triangles prim (int32) at barycentrics b1, b2 (float32), from a mesh's "
      "(13, F) float32 table (see ext/geometry.c)."},
     {"shadow_rays", (PyCFunction)(void (*)(void))ps_shadow_rays, METH_VARARGS | METH_KEYWORDS,
-     "shadow_rays(a, n_a, eps_a, b, n_b, eps_b, lanes=None)\n--\n\n(origins (3, M), directions (3, M), tmax (M,)), "
+     "shadow_rays(a, n_a, eps_a, b, n_b, eps_b, lanes=None, b_lanes=None)\n--\n\n(origins (3, M), directions (3, M), "
+     "tmax (M,)), "
      "float32: the rays Accel.occluded_between traces from tmin = RAY_TMIN, bit for bit those of "
      "pathspace.vecmath.shadow_ray (see ext/shadow.h)."},
     {"path_geometry", ps_path_geometry, METH_VARARGS,

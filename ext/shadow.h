@@ -19,12 +19,14 @@
 #define SHADOW_RAY_TMIN FLT_MIN
 
 /* Segments between surface points a and b: (3, N) points and unit normals and (N,) error bounds, all
- * C-contiguous float32; segment i joins the points of lane lanes[i] (or i). */
+ * C-contiguous float32; segment i joins point lanes[i] (or i) of a and point b_lanes[i] (or the same lane) of b,
+ * whose arrays are N_b wide (N unless b_lanes is given). */
 typedef struct {
     const float *a, *n_a, *eps_a, *b, *n_b, *eps_b;
-    const int64_t *lanes;
-    Py_ssize_t width; /* N */
-    Py_ssize_t count; /* segments: the length of lanes, or N */
+    const int64_t *lanes, *b_lanes;
+    Py_ssize_t width;   /* N */
+    Py_ssize_t width_b; /* N_b */
+    Py_ssize_t count;   /* segments: the length of lanes, or N */
 } Segments;
 
 /* The ray of segment i as float32 {org xyz, tnear, dir xyz, tfar} (see pathspace.vecmath.shadow_ray: both ends
@@ -33,19 +35,20 @@ typedef struct {
  * here, so an array changed while the GIL is released cannot send the reads out of bounds). */
 static inline int ps_segment_ray(const Segments *s, Py_ssize_t i, float r[8])
 {
-    Py_ssize_t n = s->width, lane = s->lanes ? (Py_ssize_t)s->lanes[i] : i;
-    if ((size_t)lane >= (size_t)n)
+    Py_ssize_t n = s->width, n_b = s->width_b, lane = s->lanes ? (Py_ssize_t)s->lanes[i] : i;
+    Py_ssize_t lane_b = s->b_lanes ? (Py_ssize_t)s->b_lanes[i] : lane;
+    if ((size_t)lane >= (size_t)n || (size_t)lane_b >= (size_t)n_b)
         return 0;
     float a[3], na[3], b[3], nb[3], w[3], back[3], end[3];
     for (int c = 0; c < 3; ++c) {
         a[c] = s->a[c * n + lane];
         na[c] = s->n_a[c * n + lane];
-        b[c] = s->b[c * n + lane];
-        nb[c] = s->n_b[c * n + lane];
+        b[c] = s->b[c * n_b + lane_b];
+        nb[c] = s->n_b[c * n_b + lane_b];
         w[c] = b[c] - a[c];
         back[c] = -w[c];
     }
-    float eps_a = s->eps_a[lane], eps_b = s->eps_b[lane];
+    float eps_a = s->eps_a[lane], eps_b = s->eps_b[lane_b];
     float side_a = ps_dot3(na, w) < 0.0f ? -eps_a : eps_a;       /* offset_origin(a, n_a, eps_a, w) */
     float side_b = ps_dot3(nb, back) < 0.0f ? -eps_b : eps_b;    /* offset_origin(b, n_b, eps_b, -w) */
     for (int c = 0; c < 3; ++c) {
@@ -69,9 +72,9 @@ static inline int ps_segment_ray(const Segments *s, Py_ssize_t i, float r[8])
     return !isnan(r[7]);
 }
 
-/* Fill *s from the six arrays a, n_a, eps_a, b, n_b, eps_b and lanes (None or int64 (M,)); 0, or -1 with a
- * Python exception naming the argument. */
-int ps_parse_segments(PyObject *const arrays[6], PyObject *lanes, Segments *s);
+/* Fill *s from the six arrays a, n_a, eps_a, b, n_b, eps_b, lanes and b_lanes (None or int64 (M,)); 0, or -1
+ * with a Python exception naming the argument. */
+int ps_parse_segments(PyObject *const arrays[6], PyObject *lanes, PyObject *b_lanes, Segments *s);
 /* The exception for segment i, which ps_segment_ray found invalid; returns NULL. */
 PyObject *ps_bad_segment(const Segments *s, Py_ssize_t i);
 

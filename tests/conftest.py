@@ -92,6 +92,11 @@ def made_up_side(sc, rng: np.random.Generator, n: int, connect: int, points: np.
     return Subpaths(offset=np.arange(n + 1), terminated=np.zeros(n, bool), **fields)
 
 
+def nothing_blocked(scene, a, eps_a, n_a, b, eps_b, n_b, lanes=None, b_lanes=None) -> np.ndarray:
+    """A stand-in for :func:`pathspace.estimators.visibility.segment_blocked` under which no segment is blocked."""
+    return np.zeros(a.shape[1] if lanes is None else lanes.size, bool)
+
+
 def extreme_arrivals(mesh, rng: np.random.Generator, n: int):
     """(triangles, barycentrics b1, b2, geometric normals, directions (3, n) float32) of n rays arriving on random
     triangles of ``mesh`` (about as many of each material): from both sides, at grazing angles, some along NaN

@@ -148,10 +148,13 @@ def test_a_ray_starting_in_another_surfaces_plane_does_not_hit_it_at_distance_ze
     assert np.all(walk.trace().prim < 0)
 
 
-def reference_occluded_between(accel, a, n_a, eps_a, b, n_b, eps_b, lanes=None, *, threads=0):
+def reference_occluded_between(accel, a, n_a, eps_a, b, n_b, eps_b, lanes=None, b_lanes=None, *, threads=0):
     """:meth:`Accel.occluded_between` in NumPy: the rays of :func:`pathspace.vecmath.shadow_ray`, traced."""
+    b_lanes = lanes if b_lanes is None else b_lanes
     if lanes is not None:
-        a, n_a, eps_a, b, n_b, eps_b = (np.take(x, lanes, axis=-1) for x in (a, n_a, eps_a, b, n_b, eps_b))
+        a, n_a, eps_a = (np.take(x, lanes, axis=-1) for x in (a, n_a, eps_a))
+    if b_lanes is not None:
+        b, n_b, eps_b = (np.take(x, b_lanes, axis=-1) for x in (b, n_b, eps_b))
     origin, direction, tmax = shadow_ray(a, n_a, eps_a, b, n_b, eps_b)
     return Accel.occluded(accel, origin, direction, RAY_TMIN, tmax, threads=threads)
 
@@ -181,6 +184,14 @@ def test_shadow_rays_built_in_c_are_the_numpy_references(distance):
     assert 0.03 < found.mean() < 0.97 and np.array_equal(found, expected), np.count_nonzero(found != expected)
     lanes = np.sort(rng.choice(n, n // 3, replace=False))
     assert np.array_equal(accel.occluded_between(*segments, lanes), expected[lanes])
+    # The far ends from arrays of their own, through indices of their own (b_lanes): b in another order and width.
+    order = rng.permutation(n)
+    wider = [np.concatenate([np.take(x, order, axis=-1), np.take(x, order[:7], axis=-1)], axis=-1)
+             for x in (b, n_b, eps_b)]
+    b_lanes = np.argsort(order)[lanes]
+    assert np.array_equal(accel.occluded_between(a, n_a, eps_a, *wider, lanes, b_lanes), expected[lanes])
+    assert np.array_equal(accel.occluded_between(a[:, lanes], n_a[:, lanes], eps_a[lanes], *wider, None, b_lanes),
+                          expected[lanes])
     # The rays themselves, bit for bit (signed zeros too).
     for built, reference in zip(_native.shadow_rays(*segments, lanes), shadow_ray(*(np.take(x, lanes, axis=-1)
                                                                                      for x in segments))):
@@ -213,6 +224,16 @@ def test_bad_segments_are_refused_with_their_index():
         _native.Accel.occluded_between(accel, a, n, np.array(0, np.float32), a + 1, n, eps)
     with pytest.raises(ValueError, match="n_b has N = 3, but a has N = 2"):
         accel.occluded_between(a, n, eps, a + 1, np.zeros((3, 3), np.float32), eps)
+    b3, n3, eps3 = np.ones((3, 3), np.float32), np.zeros((3, 3), np.float32), np.zeros(3, np.float32)
+    assert accel.occluded_between(a, n, eps, b3, n3, eps3, None, np.array([2, 0])).shape == (2,)
+    with pytest.raises(IndexError, match=r"b_lanes\[1\] = 3 is outside 0 .. 2"):
+        accel.occluded_between(a, n, eps, b3, n3, eps3, None, np.array([2, 3]))
+    with pytest.raises(ValueError, match="b_lanes has 3 segments, but lanes \\(or a\\) 2"):
+        accel.occluded_between(a, n, eps, b3, n3, eps3, None, np.array([2, 0, 1]))
+    with pytest.raises(ValueError, match="n_b has N = 2, but b has N = 3"):
+        accel.occluded_between(a, n, eps, b3, n, eps3, None, np.array([2, 0]))
+    with pytest.raises(TypeError, match="b_lanes must be a contiguous int64 array"):
+        _native.Accel.occluded_between(accel, a, n, eps, b3, n3, eps3, None, np.array([2, 0], np.int32))
 
 
 def test_shadow_rays_built_in_c_end_where_the_numpy_references_do():

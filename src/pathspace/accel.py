@@ -91,12 +91,16 @@ class Accel(_native.Accel):
         return super().occluded(origins, directions, tmin, tmax, threads=threads)
 
     def occluded_between(self, a: np.ndarray, n_a: np.ndarray, eps_a: np.ndarray, b: np.ndarray, n_b: np.ndarray,
-                         eps_b: np.ndarray, lanes: np.ndarray | None = None, *, threads: int = 0) -> np.ndarray:
+                         eps_b: np.ndarray, lanes: np.ndarray | None = None, b_lanes: np.ndarray | None = None, *,
+                         threads: int = 0) -> np.ndarray:
         """Boolean array: True where a triangle lies between surface points ``a`` and ``b`` (3, N) float32 with unit
         normals ``n_*`` and error bounds ``eps_*`` (N,) float32, along the ray
         :func:`pathspace.vecmath.shadow_ray` makes (built in C, bit for bit, with the points gathered there) from
-        ``RAY_TMIN``.  ``lanes``: int64 indices of the segments to test, (M,) (default: all N)."""
+        ``RAY_TMIN``.  ``lanes``: int64 indices of the segments to test, (M,) (default: all N); ``b_lanes``: int64
+        indices (M,) of their ends in ``b``, ``n_b`` and ``eps_b``, which may then have another width than ``a``'s
+        (default: the same lanes)."""
         arrays = (np.ascontiguousarray(x) for x in (a, n_a, eps_a, b, n_b, eps_b))
-        if lanes is not None:
-            lanes = np.ascontiguousarray(np.asarray(lanes).astype(np.int64, casting="safe", copy=False))
-        return super().occluded_between(*arrays, lanes, threads=threads)
+        lanes, b_lanes = (None if x is None else np.ascontiguousarray(np.asarray(x).astype(np.int64, casting="safe",
+                                                                                         copy=False))
+                          for x in (lanes, b_lanes))
+        return super().occluded_between(*arrays, lanes, b_lanes, threads=threads)

@@ -25,7 +25,7 @@ from pathspace.estimators.connections import Batch, _join
 from pathspace.estimators.join_fused import join_kernel
 from pathspace.sampler import ReplaySampler
 from pathspace.spectra import RGBColours, SpectralColours
-from conftest import count_lanes, made_up_side, same_bits
+from conftest import count_lanes, made_up_side, nothing_blocked, same_bits
 from conftest import repository_scene as scene
 
 DENSITIES = ("qs_fwd", "qs_rev", "qs_minus_rev", "pt_fwd", "pt_rev", "pt_minus_rev")
@@ -184,7 +184,7 @@ def test_fused_joins_equal_numpy_on_extreme_pairs(name, seed, occlusion, techniq
     points[:, ~same] = rng.uniform(sc.mesh.vertices.min(axis=0), sc.mesh.vertices.max(axis=0), (n, 3)).T[:, ~same]
     eye = made_up_side(sc, rng, n, 3, points)
     if not occlusion:
-        monkeypatch.setattr(connections, "segment_blocked", lambda scene, a, *rest: np.zeros(a.shape[1], bool))
+        monkeypatch.setattr(connections, "segment_blocked", nothing_blocked)
     options = {"diffuse_sampling": technique}
     parts = {}
     for kernel in ("fused", "numpy"):

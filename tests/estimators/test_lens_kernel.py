@@ -24,7 +24,7 @@ from pathspace.estimators.lens_fused import lens_kernel
 from pathspace.estimators.lt import LightTracer
 from pathspace.estimators.subpaths import FIELDS, LIGHT, SURFACE, Subpaths
 from pathspace.spectra import RGBColours, SpectralColours
-from conftest import count_lanes, extreme, extreme_normals_and_directions, same_bits
+from conftest import count_lanes, extreme, extreme_normals_and_directions, nothing_blocked, same_bits
 from conftest import repository_scene as scene
 
 
@@ -110,7 +110,7 @@ def test_fused_connections_equal_numpy_on_extreme_vertices(name, seed, occlusion
     two_sided[0] = True    # one two-sided emitting triangle, one one-sided
     assert two_sided.any() and not two_sided.all()
     if not occlusion:
-        monkeypatch.setattr(connections, "segment_blocked", lambda scene, a, *rest: np.zeros(a.shape[1], bool))
+        monkeypatch.setattr(connections, "segment_blocked", nothing_blocked)
     options = {"diffuse_sampling": technique}
     parts = {}
     for kernel in ("fused", "numpy"):

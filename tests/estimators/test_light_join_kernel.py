@@ -19,7 +19,7 @@ from pathspace.estimators.bdpt import BDPT
 from pathspace.estimators.connections import Batch, light_samples
 from pathspace.estimators.join_fused import light_sample_kernel
 from pathspace.spectra import RGBColours, SpectralColours
-from conftest import made_up_side, same_bits, scene_dict
+from conftest import made_up_side, nothing_blocked, same_bits, scene_dict
 from conftest import repository_scene as scene
 
 DENSITIES = ("qs_fwd", "qs_rev", "qs_minus_rev", "pt_fwd", "pt_rev", "pt_minus_rev")
@@ -54,9 +54,7 @@ def test_fused_light_samples_equal_numpy_on_extreme_vertices(name, seed, occlusi
     eye.u[:, rng.random(n) < 0.01] = np.nan
     eye.u[0, rng.random(n) < 0.01] = 1.0          # the last emitting triangle, at the CDF's end
     if not occlusion:
-        def clear(scene, a, eps_a, n_a, b, eps_b, n_b, lanes=None):
-            return np.zeros(a.shape[1] if lanes is None else lanes.size, bool)
-        monkeypatch.setattr(connections, "segment_blocked", clear)
+        monkeypatch.setattr(connections, "segment_blocked", nothing_blocked)
         monkeypatch.setattr(connections, "light_sample_blocked",
                             lambda scene, p, eps, n, ls, lanes: np.zeros(lanes.size, bool))
     options = {"diffuse_sampling": technique}

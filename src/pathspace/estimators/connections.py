@@ -189,11 +189,12 @@ def light_samples(batch: Batch) -> Contributions | None:
 
 def _light_samples_joined(batch: Batch, z: Vertices) -> Contributions | None:
     """:func:`light_samples` of camera vertices ``z`` through ``batch.light_kernel`` (bit for bit the same)."""
-    joined = batch.light_kernel(batch.eye, z.v)
+    eye = batch.eye
+    joined = batch.light_kernel(eye, z.v)
     useful = batch.useful(joined.value)
     batch.rays += useful.size
-    useful = useful[~segment_blocked(batch.scene, z.p, z.eps, z.n, joined.point, joined.epsilon, joined.normal,
-                                     useful)]
+    useful = useful[~segment_blocked(batch.scene, eye.p, eye.eps, eye.n, joined.point, joined.epsilon, joined.normal,
+                                     z.v.take(useful), useful)]
     if not useful.size:
         return None
     z = z.keep(useful)
@@ -236,13 +237,13 @@ def lens_samples(batch: Batch, light: Subpaths | None = None) -> Contributions |
         lens32 = np.take(lens, useful, axis=1).astype(np.float32)
     axis = (np.zeros((3, useful.size), np.float32) if camera.delta_position
             else np.repeat(camera.forward.astype(np.float32)[:, None], useful.size, axis=1))
-    ys = y.keep(useful)   # gathers only the useful vertices' fields (those y has not gathered yet)
-    unblocked = np.flatnonzero(~segment_blocked(scene, ys.p, ys.eps, ys.n, lens32, np.zeros(useful.size, np.float32),
-                                                axis))
+    unblocked = np.flatnonzero(~segment_blocked(scene, light.p, light.eps, light.n, lens32,
+                                                np.zeros(useful.size, np.float32), axis, y.v.take(useful),
+                                                np.arange(useful.size)))
     useful = useful[unblocked]
     if not useful.size:
         return None
-    y, value, raster = ys.keep(unblocked), np.take(value, useful, axis=1), np.take(raster, useful, axis=1)
+    y, value, raster = y.keep(useful), np.take(value, useful, axis=1), np.take(raster, useful, axis=1)
     if not batch.densities:
         return Contributions.make(y.lane, y.index + 1, 1, value, raster=raster, flags=batch.lane_flags.take(y.lane))
     we = we[useful]
@@ -391,12 +392,12 @@ def _join(batch: Batch, y: Vertices, z: Vertices) -> Contributions | None:
             value = np.where(dist2 > 0, y.beta * f_y * f_z * z.beta / dist2, 0.0)
     useful = batch.useful(value)
     batch.rays += useful.size
-    ys, zs = y.keep(useful), z.keep(useful)   # gather only the useful pairs' fields (those not gathered yet)
-    unblocked = np.flatnonzero(~segment_blocked(batch.scene, ys.p, ys.eps, ys.n, zs.p, zs.eps, zs.n))
-    useful = useful[unblocked]
+    light, eye = batch.light, batch.eye   # the segments' ends read where they are (no gathers)
+    useful = useful[~segment_blocked(batch.scene, light.p, light.eps, light.n, eye.p, eye.eps, eye.n,
+                                     y.v.take(useful), z.v.take(useful))]
     if not useful.size:
         return None
-    y, z, value = ys.keep(unblocked), zs.keep(unblocked), np.take(value, useful, axis=1)
+    y, z, value = y.keep(useful), z.keep(useful), np.take(value, useful, axis=1)
     if batch.join_kernel is not None:
         densities = {name: getattr(joined, name)[useful] for name in ("qs_rev", "qs_minus_rev", "pt_rev",
                                                                       "pt_minus_rev")}

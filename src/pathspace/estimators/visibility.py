@@ -16,11 +16,12 @@ __all__ = ["segment_blocked", "light_sample_blocked"]
 
 
 def segment_blocked(scene, a: np.ndarray, eps_a: np.ndarray, n_a: np.ndarray, b: np.ndarray, eps_b: np.ndarray,
-                    n_b: np.ndarray, lanes: np.ndarray | None = None) -> np.ndarray:
+                    n_b: np.ndarray, lanes: np.ndarray | None = None, b_lanes: np.ndarray | None = None) -> np.ndarray:
     """Whether geometry lies between points ``a`` and ``b`` (3, N) float32; ``eps_*`` are the error bounds
     of the surfaces they lie on (0 off surfaces) and ``n_*`` those surfaces' normals; for the segments
-    ``lanes`` (int64 indices, (M,)) only, if given."""
-    return scene.accel.occluded_between(a, n_a, eps_a, b, n_b, eps_b, lanes, threads=1)
+    ``lanes`` (int64 indices, (M,)) only, if given, and with their ends at ``b_lanes`` of ``b``, ``eps_b`` and
+    ``n_b`` (default: the same lanes; given, b's arrays may have another width than a's)."""
+    return scene.accel.occluded_between(a, n_a, eps_a, b, n_b, eps_b, lanes, b_lanes, threads=1)
 
 
 def light_sample_blocked(scene, p: np.ndarray, eps: np.ndarray, n: np.ndarray, ls, lanes: np.ndarray) -> np.ndarray:
