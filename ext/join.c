@@ -353,15 +353,21 @@ PyObject *ps_join_light_samples(PyObject *module, PyObject *args)
             }
             entity[j] = s->entity;
             epsilon[j] = s->epsilon;
-            double dist = (double)s->distance, dist2 = dist * dist;
+            /* a distance that is not finite (NaN points) is taken as a light at infinity: no area measure */
+            double dist = (double)s->distance;
+            int infinite = !isfinite(dist);
+            double dist2 = infinite ? 1.0 : dist * dist;
             /* LightSet.pdf_le toward z (AreaLight.pdf_le): the pmf times 1 / area, and the emission's density */
             float back[3] = {-s->wi[0], -s->wi[1], -s->wi[2]};
             double cos_light = (double)ps_dot3(s->normal, back);
             double pdf_emit = (lights.two_sided[s->entity] ? fabs(cos_light) * 0.5 : ps_max_zero_double(cos_light)) *
                               PS_INV_PI;
+            double pdf_bsdf_q = pdf_bsdf * eye.q[l];
             o[O_QS_FWD][j] = lights.pmf[s->entity] * (1.0 / lights.area[s->entity]);
-            o[O_QS_REV][j] = dist2 > 0.0 ? pdf_bsdf * eye.q[l] * cos_at(s->normal, s->wi) / dist2 : 0.0;
-            o[O_PT_REV][j] = dist2 > 0.0 ? pdf_emit * cos_at(z->n, s->wi) / dist2 : 0.0;
+            o[O_QS_REV][j] = infinite ? pdf_bsdf_q
+                                      : dist2 > 0.0 ? pdf_bsdf_q * cos_at(s->normal, s->wi) / dist2 : 0.0;
+            o[O_PT_REV][j] = infinite ? pdf_emit * (double)fabsf(ps_dot3(z->n, s->wi))
+                                      : dist2 > 0.0 ? pdf_emit * cos_at(z->n, s->wi) / dist2 : 0.0;
             o[O_PT_MINUS_REV][j] = ps_diffuse_reverse_pdf(technique, z->n, s->wi, z->wo) * eye.q_rev[l] *
                                    eye.g_prev[l];
         }
@@ -411,6 +417,10 @@ PyObject *ps_join_pairs(PyObject *module, PyObject *args)
         return NULL;
     }
     const int64_t *pair_start = (const int64_t *)PyArray_DATA(a[P_PAIR_START]);
+    if (pair_start[0] != 0) {
+        PyErr_Format(PyExc_ValueError, "join_pairs: pair_start must start at 0, got %lld", (long long)pair_start[0]);
+        return NULL;
+    }
     if (begin < 0 || begin > end || end > pair_start[lanes]) {
         PyErr_Format(PyExc_ValueError, "join_pairs: the pairs %zd .. %zd are not within 0 .. %lld", begin, end,
                      (long long)pair_start[lanes]);
@@ -427,10 +437,12 @@ PyObject *ps_join_pairs(PyObject *module, PyObject *args)
                   *eye_index = (const int64_t *)PyArray_DATA(a[P_EYE_INDEX]);
     npy_intp ny_c = PyArray_DIM(a[P_CY], 0), nz_c = PyArray_DIM(a[P_CZ], 0);
     npy_intp nl = PyArray_DIM(a[P_LIGHT_INDEX], 0), ne = PyArray_DIM(a[P_EYE_INDEX], 0);
-    int64_t *ys = (int64_t *)PyArray_DATA((PyArrayObject *)out[0]), *zs = (int64_t *)PyArray_DATA((PyArrayObject *)out[1]);
+    int64_t *ys = (int64_t *)PyArray_DATA((PyArrayObject *)out[0]);
+    int64_t *zs = (int64_t *)PyArray_DATA((PyArrayObject *)out[1]);
     npy_intp count = 0;
     const char *bad = NULL;
     npy_intp bad_at = 0;
+    int bad_layout = 0; /* a ValueError: the lanes' counts disagree (else an IndexError: indices outside) */
     Py_BEGIN_ALLOW_THREADS
     /* the lane of pair `begin`: the last whose pairs start at or before it (pair_start increases) */
     npy_intp lo = 0, hi = lanes;
@@ -444,7 +456,7 @@ PyObject *ps_join_pairs(PyObject *module, PyObject *args)
     for (npy_intp lane = lo, pair = begin; pair < end && lane < lanes; ++lane) {
         int64_t first = pair_start[lane], last = pair_start[lane + 1], per_y = nz[lane];
         if (last < first || (last > first && (per_y <= 0 || (last - first) % per_y != 0))) {
-            bad = "pair_start and nz disagree", bad_at = lane;
+            bad = "pair_start and nz disagree", bad_at = lane, bad_layout = 1;
             break;
         }
         if (pair >= last)
@@ -452,17 +464,19 @@ PyObject *ps_join_pairs(PyObject *module, PyObject *args)
         /* the lane's pair per_y nth_y + nth_z: its light vertex nth_y and camera vertex nth_z, z fastest */
         int64_t nth_y = (pair - first) / per_y, nth_z = (pair - first) % per_y;
         for (; pair < end && pair < last; ++pair) {
-            int64_t iy = y_start[lane] + nth_y, iz = z_start[lane] + nth_z;
-            if (iy < 0 || iy >= ny_c || iz < 0 || iz >= nz_c) {
+            int64_t iy, iz, y, z, segments;
+            if (__builtin_add_overflow(y_start[lane], nth_y, &iy) ||
+                __builtin_add_overflow(z_start[lane], nth_z, &iz) || iy < 0 || iy >= ny_c || iz < 0 || iz >= nz_c) {
                 bad = "y_start or z_start is outside cy or cz", bad_at = lane;
                 break;
             }
-            int64_t y = cy[iy], z = cz[iz];
+            y = cy[iy], z = cz[iz];
             if (y < 0 || y >= nl || z < 0 || z >= ne) {
                 bad = "cy or cz is outside the subpaths", bad_at = lane;
                 break;
             }
-            if (light_index[y] + eye_index[z] + 1 <= max_depth) { /* s + t - 1 segments */
+            /* s + t - 1 segments, s - 1 and t - 1 the vertices' indices (absurd ones that overflow: too long) */
+            if (!__builtin_add_overflow(light_index[y], eye_index[z], &segments) && segments < max_depth) {
                 ys[count] = y;
                 zs[count] = z;
                 ++count;
@@ -477,7 +491,8 @@ PyObject *ps_join_pairs(PyObject *module, PyObject *args)
     if (bad) {
         Py_DECREF(out[0]);
         Py_DECREF(out[1]);
-        PyErr_Format(PyExc_IndexError, "join_pairs: lane %zd: %s", (Py_ssize_t)bad_at, bad);
+        PyErr_Format(bad_layout ? PyExc_ValueError : PyExc_IndexError, "join_pairs: lane %zd: %s", (Py_ssize_t)bad_at,
+                     bad);
         return NULL;
     }
     PyObject *y = ps_first_entries(out[0], count), *z = y ? ps_first_entries(out[1], count) : NULL;

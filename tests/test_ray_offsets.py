@@ -232,6 +232,9 @@ def test_bad_segments_are_refused_with_their_index():
         accel.occluded_between(a, n, eps, b3, n3, eps3, None, np.array([2, 0, 1]))
     with pytest.raises(ValueError, match="n_b has N = 2, but b has N = 3"):
         accel.occluded_between(a, n, eps, b3, n, eps3, None, np.array([2, 0]))
+    b_wide = np.array([[1, 0, 2], [1, 0, 3], [1, 0, 4]], np.float32)   # its lane 1 is a's point: no segment
+    with pytest.raises(ValueError, match=r"invalid shadow ray 1: the segment from \(0, 0, 0\) to \(0, 0, 0\)"):
+        accel.occluded_between(a, n, eps, b_wide, n3, eps3, None, np.array([2, 1]))
     with pytest.raises(TypeError, match="b_lanes must be a contiguous int64 array"):
         _native.Accel.occluded_between(accel, a, n, eps, b3, n3, eps3, None, np.array([2, 0], np.int32))
 

@@ -149,8 +149,10 @@ def test_join_pairs_equal_numpy(seed, max_depth):
 @pytest.mark.parametrize("position, value, error, match", [
     (0, np.array([0, 1]), ValueError, r"pair_start \(L \+ 1,\), nz, y_start and z_start \(L,\) must agree"),
     (2, np.zeros(3, np.int64), ValueError, "must agree"),
-    (1, np.array([0, 0], np.int64), IndexError, "lane 0: pair_start and nz disagree"),
-    (1, np.array([4, 2], np.int64), IndexError, "lane 0: pair_start and nz disagree"),
+    (1, np.array([0, 0], np.int64), ValueError, "lane 0: pair_start and nz disagree"),
+    (1, np.array([4, 2], np.int64), ValueError, "lane 0: pair_start and nz disagree"),
+    (0, np.array([1, 6, 10]), ValueError, "pair_start must start at 0, got 1"),
+    (2, np.array([2**63 - 1, 0]), IndexError, "lane 0: y_start or z_start is outside cy or cz"),
     (2, np.array([5, 0], np.int64), IndexError, "lane 0: y_start or z_start is outside cy or cz"),
     (5, np.array([0, 1, 9, 3], np.int64), IndexError, "cy or cz is outside the subpaths"),
     (4, np.array([-1, 1, 2], np.int64), IndexError, "lane 0: cy or cz is outside the subpaths"),

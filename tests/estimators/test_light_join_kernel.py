@@ -19,7 +19,7 @@ from pathspace.estimators.bdpt import BDPT
 from pathspace.estimators.connections import Batch, light_samples
 from pathspace.estimators.join_fused import light_sample_kernel
 from pathspace.spectra import RGBColours, SpectralColours
-from conftest import made_up_side, nothing_blocked, same_bits, scene_dict
+from conftest import count_lanes, made_up_side, nothing_blocked, same_bits, scene_dict
 from conftest import repository_scene as scene
 
 DENSITIES = ("qs_fwd", "qs_rev", "qs_minus_rev", "pt_fwd", "pt_rev", "pt_minus_rev")
@@ -61,6 +61,7 @@ def test_fused_light_samples_equal_numpy_on_extreme_vertices(name, seed, occlusi
     parts = {}
     for kernel in ("fused", "numpy"):
         fused, _ = light_sample_kernel(sc, RGBColours, options, kernel)
+        assert (fused is not None) == (kernel == "fused")
         batch = Batch(sc, eye, eye, None, RGBColours, options, 100, np.array([0, n]), light_kernel=fused)
         with np.errstate(all="ignore"):
             parts[kernel] = (light_samples(batch), batch.rays, batch.nonfinite)
@@ -87,6 +88,18 @@ def test_two_sided_lights_reach_vertices_on_both_sides():
     side = np.einsum("ij,ij->j", joined.normal.astype(np.float64), eye.p.astype(np.float64) - joined.point)
     lit = (joined.value > 0).any(axis=0)
     assert (lit & (side > 0)).sum() > 100 and (lit & (side < 0)).sum() > 100
+
+
+def test_fused_bdpt_equals_numpy_with_a_thin_lens(monkeypatch):
+    """A thin lens: the light samples joined in C, the lens samples in NumPy (their segments' far ends on the lens
+    indexed on their own); the whole image bit for bit."""
+    sc = scene("cornell-box-thin-lens")
+    light_joins = count_lanes(monkeypatch, "join_light_samples", 9)
+    fused = ps.render(sc, "bdpt", spp=2, seed=3, threads=1)
+    assert light_joins[0] > 0
+    numpy = ps.render(sc, "bdpt", spp=2, seed=3, threads=1, kernel="numpy")
+    assert light_joins[0] > 0 and fused.stats["rays"] == numpy.stats["rays"]
+    same_bits(fused.image, numpy.image)
 
 
 # -- what the kernel leaves to NumPy, and its refusals -------------------------------------------------------

@@ -52,9 +52,10 @@ pyramid : int, default 0
     (Veach's pyramid; ``RenderResult.strategies``).
 kernel : "fused" (default) or "numpy"
     "fused" takes the subpaths' vertices (BSDF sample, roulette, reverse
-    density), joins light and camera vertices (s, t >= 2) and joins light
-    vertices and the camera (t = 1) in one C pass each where the scene
-    allows (see :func:`pathspace.estimators.pt_fused.walk_vertex`,
+    density), joins light and camera vertices (s, t >= 2), camera vertices
+    and light samples (s = 1), and light vertices and the camera (t = 1) in
+    one C pass each where the scene allows (see
+    :func:`pathspace.estimators.pt_fused.walk_vertex`,
     :mod:`pathspace.estimators.join_fused` and
     :mod:`pathspace.estimators.lens_fused`); "numpy" always in the NumPy
     code, the reference.  Both give the same image bit for bit.

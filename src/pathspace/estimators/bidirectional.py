@@ -242,7 +242,8 @@ class Bidirectional(Estimator):
 
     def _kernels(self, scene, settings: SubpathSettings) -> dict:
         """The fused C kernels of a batch's connections on ``scene`` with ``settings`` (the :class:`Batch` fields
-        ``lens_kernel`` and ``join_kernel``) that this estimator uses and that serve the scene; none here."""
+        ``lens_kernel``, ``join_kernel`` and ``light_kernel``) that this estimator uses and that serve the scene;
+        none here."""
         return {}
 
     def _walk_settings(self, scene, mode, samplers: Mapping[str, Sampler], counters: Counters,

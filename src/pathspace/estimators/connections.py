@@ -31,9 +31,10 @@ from .. import _native
 from ..bsdfs import MaterialLanes, Surface
 from ..mis import LIGHT_DELTA, Connections
 from ..vecmath import dot
-from .join_fused import LIGHT_SELECTION, JoinKernel, LightSampleKernel
+from .join_fused import JoinKernel, LightSampleKernel
 from .lens_fused import LensKernel
-from .subpaths import LIGHT, SURFACE, LensHits, Subpaths, Vertices, area_density, cos_at, reverse_pdf, to_area
+from .subpaths import (LIGHT, LIGHT_SELECTION, SURFACE, LensHits, Subpaths, Vertices, area_density, cos_at,
+                       reverse_pdf, to_area)
 from .visibility import light_sample_blocked, segment_blocked
 
 __all__ = ["Batch", "Contributions", "emitter_hits", "light_samples", "lens_samples", "lens_hits", "joins",

@@ -33,11 +33,9 @@ from .. import _native
 from ..lights import AreaLight
 from ..spectra import RGBColours
 from .pt_fused import diffuse_tables, emitter_radiance, unserved
+from .subpaths import LIGHT_SELECTION
 
 __all__ = ["JoinKernel", "JoinResult", "LightJoin", "LightSampleKernel", "join_kernel", "light_sample_kernel"]
-
-# How connections.light_samples chooses the light of a sample.
-LIGHT_SELECTION = "power"
 
 
 @dataclass

@@ -84,6 +84,9 @@ CAMERA_START = Dimensions(pixel=2, lens=2)
 LIGHT_START = Dimensions(emission=5, connect=2)
 CAMERA_VERTEX = Dimensions(bsdf=3, roulette=1, connect=3)
 LIGHT_VERTEX = Dimensions(bsdf=3, roulette=1, connect=2)
+# How the light subpaths choose their light, and the light samples joined to camera vertices theirs: one choice,
+# so that a light sample's origin density (pmf / area) is the light walk's.
+LIGHT_SELECTION = "power"
 # What the walks keep per lane besides WALK_FIELDS; the last three only for the vertex densities (walks with
 # ``densities``): q, and the previous vertex's normal and whether it is at infinity.
 _WALK_FIELDS = WALK_FIELDS + ("lane",)
@@ -564,7 +567,7 @@ def _light_walk(settings: SubpathSettings, count: int, sampler, recorder: _Recor
     scene, colours = settings.scene, settings.colours
     lights = scene.lights
     u = LIGHT_START.split(sampler.draw(LIGHT_START.size))
-    e = lights.sample_le(u.emission, colours, "power")
+    e = lights.sample_le(u.emission, colours, LIGHT_SELECTION)
     with np.errstate(divide="ignore", invalid="ignore"):
         beta0 = np.where(e.pdf_pos > 0, 1.0 / e.pdf_pos, 0.0)
         beta = e.value * np.where(e.pdf_dir > 0, beta0 * e.cos_light / e.pdf_dir, 0.0)
