@@ -299,11 +299,12 @@ PyObject *ps_join_light_samples(PyObject *module, PyObject *args)
     };
     if (!ps_outputs_allocated(out, O_COUNT))
         return NULL;
-    double *o[O_COUNT];
-    for (int j = 0; j < O_COUNT; ++j)
-        o[j] = (double *)PyArray_DATA((PyArrayObject *)out[j]);
-    int64_t *entity = (int64_t *)o[O_ENTITY];
-    float *point = (float *)o[O_POINT], *normal = (float *)o[O_NORMAL], *epsilon = (float *)o[O_EPSILON];
+#define OUTPUT(j) PyArray_DATA((PyArrayObject *)out[j])
+    double *value = OUTPUT(O_VALUE), *qs_fwd = OUTPUT(O_QS_FWD), *qs_rev = OUTPUT(O_QS_REV),
+           *pt_rev = OUTPUT(O_PT_REV), *pt_minus_rev = OUTPUT(O_PT_MINUS_REV);
+    int64_t *entity = OUTPUT(O_ENTITY);
+    float *point = OUTPUT(O_POINT), *normal = OUTPUT(O_NORMAL), *epsilon = OUTPUT(O_EPSILON);
+#undef OUTPUT
     const int64_t *zs = (const int64_t *)PyArray_DATA(a[L_Z]);
     const double *u = (const double *)PyArray_DATA(a[L_U]);
     const npy_bool *diffuse = (const npy_bool *)PyArray_DATA(a[L_DIFFUSE]);
@@ -347,7 +348,7 @@ PyObject *ps_join_light_samples(PyObject *module, PyObject *args)
             int lit = s->facing && s->pdf > 0.0;
             for (int c = 0; c < CHANNELS; ++c) {
                 double f_z = reflectance[c * m + mz] * cos_z;
-                o[O_VALUE][c * k + j] = lit ? eye.beta[c * v + l] * f_z * radiance[c * e + s->entity] / s->pdf : 0.0;
+                value[c * k + j] = lit ? eye.beta[c * v + l] * f_z * radiance[c * e + s->entity] / s->pdf : 0.0;
                 point[c * k + j] = s->point[c];
                 normal[c * k + j] = s->normal[c];
             }
@@ -363,12 +364,12 @@ PyObject *ps_join_light_samples(PyObject *module, PyObject *args)
             double pdf_emit = (lights.two_sided[s->entity] ? fabs(cos_light) * 0.5 : ps_max_zero_double(cos_light)) *
                               PS_INV_PI;
             double pdf_bsdf_q = pdf_bsdf * eye.q[l];
-            o[O_QS_FWD][j] = lights.pmf[s->entity] * (1.0 / lights.area[s->entity]);
-            o[O_QS_REV][j] = infinite ? pdf_bsdf_q
+            qs_fwd[j] = lights.pmf[s->entity] * (1.0 / lights.area[s->entity]);
+            qs_rev[j] = infinite ? pdf_bsdf_q
                                       : dist2 > 0.0 ? pdf_bsdf_q * cos_at(s->normal, s->wi) / dist2 : 0.0;
-            o[O_PT_REV][j] = infinite ? pdf_emit * (double)fabsf(ps_dot3(z->n, s->wi))
+            pt_rev[j] = infinite ? pdf_emit * (double)fabsf(ps_dot3(z->n, s->wi))
                                       : dist2 > 0.0 ? pdf_emit * cos_at(z->n, s->wi) / dist2 : 0.0;
-            o[O_PT_MINUS_REV][j] = ps_diffuse_reverse_pdf(technique, z->n, s->wi, z->wo) * eye.q_rev[l] *
+            pt_minus_rev[j] = ps_diffuse_reverse_pdf(technique, z->n, s->wi, z->wo) * eye.q_rev[l] *
                                    eye.g_prev[l];
         }
     }
