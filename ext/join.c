@@ -365,12 +365,10 @@ PyObject *ps_join_light_samples(PyObject *module, PyObject *args)
                               PS_INV_PI;
             double pdf_bsdf_q = pdf_bsdf * eye.q[l];
             qs_fwd[j] = lights.pmf[s->entity] * (1.0 / lights.area[s->entity]);
-            qs_rev[j] = infinite ? pdf_bsdf_q
-                                      : dist2 > 0.0 ? pdf_bsdf_q * cos_at(s->normal, s->wi) / dist2 : 0.0;
+            qs_rev[j] = infinite ? pdf_bsdf_q : dist2 > 0.0 ? pdf_bsdf_q * cos_at(s->normal, s->wi) / dist2 : 0.0;
             pt_rev[j] = infinite ? pdf_emit * (double)fabsf(ps_dot3(z->n, s->wi))
-                                      : dist2 > 0.0 ? pdf_emit * cos_at(z->n, s->wi) / dist2 : 0.0;
-            pt_minus_rev[j] = ps_diffuse_reverse_pdf(technique, z->n, s->wi, z->wo) * eye.q_rev[l] *
-                                   eye.g_prev[l];
+                                 : dist2 > 0.0 ? pdf_emit * cos_at(z->n, s->wi) / dist2 : 0.0;
+            pt_minus_rev[j] = ps_diffuse_reverse_pdf(technique, z->n, s->wi, z->wo) * eye.q_rev[l] * eye.g_prev[l];
         }
     }
     Py_END_ALLOW_THREADS
