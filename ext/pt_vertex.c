@@ -147,9 +147,10 @@ static inline double clipped_max(const double *x, double cap)
 }
 
 /* RussianRoulette.survival at a vertex reached after `depth` segments, of a material with `albedo` (specular
- * or not), for a walk of throughput beta taking the sample s: "throughput" reads beta weight scale (Walk.survival:
- * scale = eta_scale eta^2 undoes the 1 / eta^2 of a radiance walk's refractions; a light subpath's is its
- * rr_scale, the throughput relative to the ray leaving the light). */
+ * or not), for a walk of throughput beta taking the sample s: "albedo" survives specular vertices with 1 before
+ * the trapped depth; "throughput" reads beta weight scale (Walk.survival: scale = eta_scale eta^2 undoes the
+ * 1 / eta^2 of a radiance walk's refractions; a light subpath's is its rr_scale, the throughput relative to the
+ * ray leaving the light) and survives specular vertices with at most their albedo from the trapped depth on. */
 static double survival(const Options *o, int depth, double albedo, int specular, const double *beta,
                        const Sample *s, double scale)
 {
@@ -157,8 +158,11 @@ static double survival(const Options *o, int depth, double albedo, int specular,
         return 1.0;
     if (o->policy == ROULETTE_FIXED)
         return 1.0 - o->probability;
-    if (o->policy == ROULETTE_ALBEDO)
+    if (o->policy == ROULETTE_ALBEDO) {
+        if (specular && depth < o->trapped_depth)
+            return 1.0;
         return albedo < 0.0 ? 0.0 : (albedo > 1.0 ? 1.0 : albedo);
+    }
     double throughput[CHANNELS];
     for (int c = 0; c < CHANNELS; ++c)
         throughput[c] = beta[c] * s->weight[c] * scale;

@@ -6,7 +6,7 @@ import pytest
 
 import pathspace as ps
 from pathspace.bsdfs import Dielectric, Diffuse, MaterialTable, Mirror, Phong
-from pathspace.roulette import POLICIES, SPECULAR_CONTINUATION, TRAPPED_DEPTH, RussianRoulette
+from pathspace.roulette import ALBEDO_TRAPPED_DEPTH, POLICIES, SPECULAR_CONTINUATION, TRAPPED_DEPTH, RussianRoulette
 from conftest import scene_dict
 
 
@@ -37,11 +37,32 @@ def test_throughput_survival_at_specular_vertices_is_at_most_their_albedo():
     np.testing.assert_array_equal(roulette.survival(depth, throughput, albedo), [1.0, 1.0, 0.5, 1.0, 0.7])
 
 
+def test_albedo_survival_at_specular_vertices_is_one_until_the_trapped_depth():
+    """Specular vertices (capped at SPECULAR_CONTINUATION in the albedo table) survive with 1 on walks shorter than
+    ALBEDO_TRAPPED_DEPTH, then with their capped albedo; other vertices with their albedo at every depth.  MIS sees
+    1 at specular vertices whatever the depth (exact for the shorter walks)."""
+    depth = np.array([ALBEDO_TRAPPED_DEPTH - 1, ALBEDO_TRAPPED_DEPTH, ALBEDO_TRAPPED_DEPTH - 1, 3, 1])
+    albedo = np.array([SPECULAR_CONTINUATION, SPECULAR_CONTINUATION, 0.886, SPECULAR_CONTINUATION, 0.5])
+    specular = np.array([True, True, False, True, False])
+    roulette = RussianRoulette("albedo", 2)
+    assert roulette.trapped_depth == ALBEDO_TRAPPED_DEPTH < TRAPPED_DEPTH == RussianRoulette("throughput").trapped_depth
+    np.testing.assert_array_equal(roulette.survival(depth, None, albedo, specular),
+                                  [1.0, SPECULAR_CONTINUATION, 0.886, 1.0, 1.0])
+    np.testing.assert_array_equal(roulette.survival(depth, None, albedo), [SPECULAR_CONTINUATION] * 2 + [0.886] +
+                                  [SPECULAR_CONTINUATION, 1.0])
+    np.testing.assert_array_equal(roulette.mis_survival(albedo, specular), [1.0, 1.0, 0.886, 1.0, 0.5])
+    fixed = RussianRoulette("fixed", 1, probability=0.25)   # the other local policy: specular vertices as any other
+    np.testing.assert_array_equal(fixed.survival(depth, None, albedo, specular), np.full(5, 0.75))
+    np.testing.assert_array_equal(fixed.mis_survival(albedo, specular), np.full(5, 0.75))
+
+
 def test_paths_trapped_in_glass_end():
     """The tessellated glass sphere of the specular box traps some paths by total internal reflection;
     with survival 1 they ran for thousands of segments (4957 here), each a wavefront step of a few lanes."""
     result = ps.render(ps.scene_from_dict(scene_dict("cornell-box-specular", (64, 64))), "pt", spp=8, seed=1)
     assert result.stats["longest_subpath"] < TRAPPED_DEPTH + 150  # 0.9^150: 1e-7 of the trapped walks
+    result = ps.render(ps.scene_from_dict(scene_dict("cornell-box-specular", (64, 64))), "bdpt", spp=8, seed=1)
+    assert result.stats["longest_subpath"] < ALBEDO_TRAPPED_DEPTH + 150   # "albedo" on the subpaths
 
 
 def test_only_throughput_depends_on_the_walk():

@@ -9,11 +9,23 @@ the estimate stays unbiased for any q in (0, 1].  Policies (``rr``):
 ``"off"``         q = 1: walks end only by escaping, absorption or ``max_depth``.
 ``"fixed"``       q = 1 - ``rr_probability`` (a fixed termination probability).
 ``"albedo"``      q = the albedo of the vertex's material (the largest channel
-                  of its reflectance; lossless specular materials -- mirrors,
-                  glass -- at most 0.9, so that walks trapped in glass by total
-                  internal reflection end: the weight grows by 1/0.9 per bounce
-                  and the variance stays finite while a walk leaves the glass
-                  with probability > 0.1).  Termination probability 1 - albedo.
+                  of its reflectance).  Termination probability 1 - albedo.
+                  Specular (delta) materials -- mirrors, glass -- survive
+                  with q = 1 on walks shorter than ``ALBEDO_TRAPPED_DEPTH``
+                  (24) segments, then with at most 0.9, so that walks trapped
+                  in glass by total internal reflection end: the weight grows
+                  by 1/0.9 per bounce and the variance stays finite while a
+                  walk leaves the glass with probability > 0.1.  Paths seen
+                  through a chain of specular vertices (a caustic in a
+                  mirror: specular-diffuse-specular) are sampled only by
+                  walks through all of them, and 0.9 at each vertex raised
+                  their variance: with q = 1 BDPT's relMSE on
+                  scenes/cornell-box-specular fell by a quarter.  The depth
+                  is far below the 128 of "throughput" because BDPT's walks
+                  keep a wavefront until its last path ends: a trapped walk
+                  holds a work item for every segment it takes, and 128
+                  cost BDPT a fifth more time there than 24
+                  (docs/performance.md).
 ``"throughput"``  q = min(largest channel of the walk's throughput after this
                   vertex, ``rr_cap``): walks carrying little energy end early
                   and a survivor's throughput is lifted back toward 1 (pbrt-v4's
@@ -46,6 +58,9 @@ the vertex's material, the same whichever direction a walk passes the
 vertex, so bidirectional estimators can include it in the vertex densities
 that their MIS weights compare (as SmallVCM does; :meth:`RussianRoulette.mis_survival`;
 BDPT's default includes the camera subpaths' only, see ``in_mis`` below).
+(At specular vertices "albedo" depends on the depth too, beyond
+``ALBEDO_TRAPPED_DEPTH``; the densities take its q = 1 there, exact for every
+shorter walk.)
 Those densities must be one function of the path for every strategy -- or
 the weights of a path no longer sum to one and the image is biased -- so
 they take q at every vertex, also where a walk had not yet reached
@@ -69,7 +84,8 @@ import numpy as np
 
 from .checks import choice, integer, number
 
-__all__ = ["RussianRoulette", "POLICIES", "SPECULAR_CONTINUATION", "TRAPPED_DEPTH", "roulette_warnings"]
+__all__ = ["RussianRoulette", "POLICIES", "SPECULAR_CONTINUATION", "TRAPPED_DEPTH", "ALBEDO_TRAPPED_DEPTH",
+           "roulette_warnings"]
 
 POLICIES = ("off", "fixed", "albedo", "throughput")
 # The largest survival probability "albedo" gives lossless specular (delta) materials.
@@ -77,6 +93,8 @@ SPECULAR_CONTINUATION = 0.9
 # "throughput" survival at specular vertices reached after this many segments is at most their albedo: walks
 # trapped in glass by total internal reflection end.  Earlier, variance grows (see the module docstring).
 TRAPPED_DEPTH = 128
+# "albedo" survival at specular vertices is 1 on walks shorter than this, then at most SPECULAR_CONTINUATION.
+ALBEDO_TRAPPED_DEPTH = 24
 
 
 @dataclass(frozen=True)
@@ -114,15 +132,27 @@ class RussianRoulette:
                 "throughput": f"survival probability = max throughput, capped at {self.cap:g}"}[self.policy]
         return f"Russian roulette from depth {self.start_depth}: {rule}"
 
-    def mis_survival(self, albedo: np.ndarray) -> np.ndarray:
+    @property
+    def trapped_depth(self) -> int:
+        """Walks this long or longer survive specular vertices with at most their albedo (see the module)."""
+        return ALBEDO_TRAPPED_DEPTH if self.policy == "albedo" else TRAPPED_DEPTH
+
+    def mis_survival(self, albedo: np.ndarray, specular: np.ndarray | None = None) -> np.ndarray:
         """q as multiple importance sampling puts it in the vertex densities, at vertices of materials with
-        ``albedo`` (N,): a local policy's survival past ``rr_depth``, whatever the depth; 1 for
-        "throughput" and "off", and for any policy that is not ``in_mis``."""
-        return self._local_survival(albedo) if self.in_mis else np.ones(albedo.shape)
+        ``albedo`` (N,), specular (delta) where ``specular`` (N,) (None: none are): a local policy's survival
+        past ``rr_depth``, whatever the depth ("albedo": 1 at specular vertices, as walks shorter than
+        :attr:`trapped_depth` survive them); 1 for "throughput" and "off", and for any policy that is not
+        ``in_mis``."""
+        if not self.in_mis:
+            return np.ones(albedo.shape)
+        q = self._local_survival(albedo)
+        if self.policy == "albedo" and specular is not None:
+            q = np.where(specular, 1.0, q)
+        return q
 
     def _local_survival(self, albedo: np.ndarray) -> np.ndarray:
-        """A local policy's survival past ``rr_depth`` at vertices of materials with ``albedo`` (N,); 1 for
-        "throughput" and "off"."""
+        """A local policy's survival past ``rr_depth`` at vertices of materials with ``albedo`` (N,) (specular
+        vertices aside); 1 for "throughput" and "off"."""
         if self.policy == "fixed":
             return np.full(albedo.shape, 1.0 - self.probability)
         if self.policy == "albedo":
@@ -138,18 +168,21 @@ class RussianRoulette:
         allowed); ``albedo`` (N,) the albedo of each vertex's material
         (see :attr:`pathspace.bsdfs.MaterialTable.albedo`, at most
         :data:`SPECULAR_CONTINUATION` for specular materials); ``specular``
-        (N,) bool: vertices of specular (delta) materials, where "throughput"
-        survives with at most their albedo from ``TRAPPED_DEPTH`` segments on
-        (None: none are).
+        (N,) bool: vertices of specular (delta) materials (None: none are),
+        where "albedo" survives with 1 and "throughput" as its throughput says
+        on walks shorter than :attr:`trapped_depth`, both with at most their
+        albedo from there on.
         """
         if self.policy == "off" or depth.max(initial=0) < self.start_depth:
             return None
         if self.local:
             q = self._local_survival(albedo)
+            if self.policy == "albedo" and specular is not None:
+                q = np.where(specular & (depth < self.trapped_depth), 1.0, q)
         else:
             q = np.clip(throughput.max(axis=0), 0.0, self.cap)
             if specular is not None:
-                q = np.where(specular & (depth >= TRAPPED_DEPTH), np.minimum(q, albedo), q)
+                q = np.where(specular & (depth >= self.trapped_depth), np.minimum(q, albedo), q)
         return np.where(depth >= self.start_depth, q, 1.0)
 
 

@@ -28,7 +28,7 @@ import numpy as np
 from .. import _native
 from ..bsdfs import DIFFUSE_SAMPLING, Dielectric, Diffuse, Mirror
 from ..lights import AreaLight
-from ..roulette import POLICIES, TRAPPED_DEPTH
+from ..roulette import POLICIES
 from ..spectra import RGBColours, RGBMode
 from ..warp import azimuth
 
@@ -165,7 +165,7 @@ def _options(technique: str, heuristic: int, roulette, exponent: float) -> tuple
     (a RussianRoulette) and the heuristic's ``exponent``."""
     depth_limit = np.iinfo(np.int32).max   # depths are int32: a later start is never reached
     return (DIFFUSE_SAMPLING.index(technique), heuristic, POLICIES.index(roulette.policy),
-            min(roulette.start_depth, depth_limit), TRAPPED_DEPTH, exponent, float(roulette.probability),
+            min(roulette.start_depth, depth_limit), roulette.trapped_depth, exponent, float(roulette.probability),
             float(roulette.cap))
 
 

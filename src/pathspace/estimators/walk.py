@@ -170,13 +170,18 @@ class Walk:
                 scale = lanes.eta_scale if sample.eta is None else lanes.eta_scale * sample.eta * sample.eta
                 throughput = throughput * scale
         materials = self.scene.materials
-        specular = materials.delta.take(hit.material) if throughput is not None and materials.delta.any() else None
-        return roulette.survival(lanes.depth, throughput, materials.albedo.take(hit.material), specular)
+        return roulette.survival(lanes.depth, throughput, materials.albedo.take(hit.material), self._specular(hit))
 
     def mis_survival(self, hit: Arrival, roulette: RussianRoulette | None = None) -> np.ndarray:
         """q at ``hit`` as multiple importance sampling sees it (N,), under this walk's roulette or another
         (the opposite walk's; see :meth:`pathspace.roulette.RussianRoulette.mis_survival`)."""
-        return (roulette or self.roulette).mis_survival(self.scene.materials.albedo.take(hit.material))
+        return (roulette or self.roulette).mis_survival(self.scene.materials.albedo.take(hit.material),
+                                                        self._specular(hit))
+
+    def _specular(self, hit: Arrival) -> np.ndarray | None:
+        """Whether the material at each of ``hit``'s lanes is specular (delta), or None if the scene has none."""
+        delta = self.scene.materials.delta
+        return delta.take(hit.material) if delta.any() else None
 
     def scatter(self, hit: Arrival, sample: BSDFSample, u_roulette: np.ndarray, survival: np.ndarray | None,
                 q_mis: np.ndarray | None = None) -> np.ndarray:
