@@ -39,7 +39,7 @@ the estimate stays unbiased for any q in (0, 1].  Policies (``rr``):
                   lanes, which made path tracing there 10-20x slower to a
                   given error (benchmarks/speed.py) -- so at specular vertices
                   reached after ``TRAPPED_DEPTH`` (128) segments q is also at
-                  most their albedo as "albedo" sees it (at most 0.9).  Not
+                  most their albedo as the table holds it (at most 0.9).  Not
                   earlier: the weight of light escaping from such a trap
                   grows by 1/0.9 per trapped bounce, and where the traps hold
                   much of the light (a glass sphere in a white furnace) a
