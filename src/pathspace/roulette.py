@@ -24,8 +24,8 @@ the estimate stays unbiased for any q in (0, 1].  Policies (``rr``):
                   is far below the 128 of "throughput" because BDPT's walks
                   keep a wavefront until its last path ends: a trapped walk
                   holds a work item for every segment it takes, and 128
-                  cost BDPT a fifth more time there than 24
-                  (docs/performance.md).
+                  cost BDPT 15% more time there than 24 (16 and 48: the
+                  same as 24; docs/performance.md).
 ``"throughput"``  q = min(largest channel of the walk's throughput after this
                   vertex, ``rr_cap``): walks carrying little energy end early
                   and a survivor's throughput is lifted back toward 1 (pbrt-v4's

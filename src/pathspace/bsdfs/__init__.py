@@ -42,7 +42,7 @@ class MaterialTable:
     delta_names : the names of those materials
     albedo : (M,) float64, the largest fraction of light each material reflects (Russian roulette's
         "albedo" policy; see :mod:`pathspace.roulette`), lossless delta materials capped at
-        ``SPECULAR_CONTINUATION``
+        ``SPECULAR_CONTINUATION`` (the survival of walks trapped in them)
     """
 
     def __init__(self, names: list[str], materials: list) -> None:
