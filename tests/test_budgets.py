@@ -1,5 +1,6 @@
 """Honest time budgets: every estimator on every scene in scenes/ stops within 5% (or 0.2 s) of its budget,
-however long its paths; the seconds reported are render time (scene load and BVH builds excluded)."""
+however long its paths, and not before half of it (its workers stop taking items that could not end by the
+deadline); the seconds reported are render time (scene load and BVH builds excluded)."""
 from __future__ import annotations
 
 import time
@@ -22,7 +23,7 @@ def check_budget(scene, estimator: str, budget: float) -> None:
     result = ps.render(scene, estimator, time=budget, seed=1, threads=2)
     wall = time.perf_counter() - start
     seconds = result.stats["seconds"]
-    assert budget <= seconds <= allowed(budget), (estimator, seconds)
+    assert 0.5 * budget <= seconds <= allowed(budget), (estimator, seconds)
     assert wall <= allowed(budget) + 0.5, (estimator, wall)  # BVH builds and film development on top
     assert "BVH builds excluded" in result.stats["clock"]
     if result.stats["spp"] == 0:

@@ -155,7 +155,8 @@ def render(scene: Scene | str | os.PathLike, estimator: str | Estimator = "pt", 
     """Render ``scene`` with an estimator (a name and its ``params``, or an :class:`Estimator`).
 
     ``spp`` samples (passes) per pixel (default: the scene's ``[render]`` spp, else 16), or ``time``: the
-    passes complete within that many seconds of rendering (work in flight then is dropped).
+    passes complete within that many seconds of rendering (work in flight then is dropped; workers take no
+    item they would not finish by then, so the render may end earlier, but not before half the time).
     ``seed`` seeds every random stream: the same seed gives the same image.
     ``threads``: workers (default: every core this process may use).
     ``first_pass``: renders of disjoint pass ranges with the same seed are

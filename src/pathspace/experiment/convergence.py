@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import time as _time
+import warnings
 from dataclasses import dataclass, field
 from typing import Any, Sequence
 
@@ -70,20 +71,27 @@ class Convergence:
 
     def at(self, seconds: float | None = None, spp: float | None = None, metric: str = "relmse"):
         """Equal-time (``seconds``) or equal-spp (``spp``) comparison: each run's metric interpolated on its
-        log-log curve at that point; mean and standard error over seeds, per estimator."""
+        log-log curve at that point; mean and standard error over seeds, per estimator.  Runs whose curve
+        does not reach the point are left out, with a warning (a time-budgeted run ends with its last whole
+        work item, which may be before its budget: compare at a time every run reached)."""
         if (seconds is None) == (spp is None):
             raise ValueError("give either seconds or spp")
         x, where = ("seconds", seconds) if seconds is not None else ("spp", spp)
         if not where > 0:
             raise ValueError(f"{x}: expected a number > 0 (the curves are interpolated in log-log), got {where!r}")
         pd = pandas()
-        rows = []
+        rows, short = [], []
         for (label, seed), run in self.table.groupby(["estimator", "seed"], sort=False):
             run = run[(run["spp"] > 0) & (run[x] > 0)].sort_values(x)   # no curve before a run's first pass
             if run.empty or where < run[x].iloc[0] or where > run[x].iloc[-1]:
+                if not run.empty and where > run[x].iloc[-1]:
+                    short.append(f"{label} seed {seed} ({run[x].iloc[-1]:.4g})")
                 continue  # outside the run: no extrapolation
             value = np.exp(np.interp(np.log(where), np.log(run[x]), np.log(np.maximum(run[metric], 1e-300))))
             rows.append({"estimator": label, "seed": seed, metric: value})
+        if short:
+            warnings.warn(f"at({x}={where:g}): left out {len(short)} run(s) that ended before it: {', '.join(short)}",
+                          stacklevel=2)
         return _mean_over_seeds(pd.DataFrame(rows, columns=["estimator", "seed", metric]), metric)
 
     def efficiency(self, metric: str = "relmse"):
