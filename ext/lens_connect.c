@@ -7,18 +7,18 @@
  *   - what y sends along w (Veach 1997, eq. 10.8): at a point on an area light, its radiance toward w (0 behind
  *     a one-sided light) times |cos| at the light; at a diffuse surface, f |cos| = albedo max(cos, 0) / pi with
  *     the surface turned toward the vertex the walk came from (pathspace.bsdfs.Diffuse.eval);
- *   - times y's throughput beta;
+ *   - the contribution: y's throughput beta times what it sends, times the camera's importance
+ *     We = 1 / (A lens_area cos^4) at the lens (PinholeCamera.importance_of; 0 off the film) over the pinhole's
+ *     density (0 where either is not positive);
  *   - for BDPT, given the vertices' roulette survivals q, q_rev and g_prev (else None), the MIS densities the
  *     join changes (ext/mis.c): pt_rev, the density with which y samples w (the light's cosine-weighted
  *     emission, or the BSDF's technique) times q, in area measure at the pinhole (|cos| at the lens / d^2;
  *     Veach 1997, eq. 8.10); qs_minus_rev, the density with which y samples its predecessor with light arriving
- *     from the lens (0 on a light) times q_rev and g_prev (eq. 10.7); and |cos| at y and d^2, which turn the
- *     camera's density at y (from its importance) into area measure.
- * The camera's importance We (its cos^4, which NumPy's power computes differently from C's pow), the division
- * by the pinhole's density and the camera's density at y stay in NumPy.  Every value is computed in the
- * operations and order of the NumPy code (lens_samples, _toward_lens and the lights' pdf_le, which the tests keep
- * as the reference: tests/estimators/test_lens_kernel.py), so the contributions and densities are bit for bit
- * the same.  RGB only.
+ *     from the lens (0 on a light) times q_rev and g_prev (eq. 10.7); and qs_rev, the camera's density of y:
+ *     its direction's, We lens_area |cos| at the lens (see pathspace.camera), in area measure at y.
+ * Every value is computed in the operations and order of the NumPy code (lens_samples, _toward_lens, the
+ * camera's importance_of and the lights' pdf_le, which the tests keep as the reference:
+ * tests/estimators/test_lens_kernel.py), so the contributions and densities are bit for bit the same.  RGB only.
  */
 #include "camera.h"
 #include "diffuse.h"
@@ -91,13 +91,14 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
 {
     (void)module;
     PyObject *objs[A_COUNT], *vectors[4], *density_objs[D_COUNT];
-    double tan_x, tan_y, lens_area;
+    double tan_x, tan_y, lens_area, importance_scale;
     Py_ssize_t width, height;
     int technique;
-    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOOOddnndiOOO:lens_connect", &objs[0], &objs[1], &objs[2], &objs[3],
+    if (!PyArg_ParseTuple(args, "OOOOOOOOOOOOOOOOddnnddiOOO:lens_connect", &objs[0], &objs[1], &objs[2], &objs[3],
                           &objs[4], &objs[5], &objs[6], &objs[7], &objs[8], &objs[9], &objs[10], &objs[11],
                           &vectors[0], &vectors[1], &vectors[2], &vectors[3], &tan_x, &tan_y, &width, &height,
-                          &lens_area, &technique, &density_objs[0], &density_objs[1], &density_objs[2]))
+                          &lens_area, &importance_scale, &technique, &density_objs[0], &density_objs[1],
+                          &density_objs[2]))
         return NULL;
     PyArrayObject *a[A_COUNT], *da[D_COUNT];
     PsPinhole cam;
@@ -119,11 +120,10 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
                      DIFFUSE_COSINE, DIFFUSE_UNIFORM, technique);
         return NULL;
     }
-    int outputs = densities ? 9 : 5;
-    PyObject *out[9] = {PyArray_SimpleNew(2, dims, NPY_DOUBLE), PyArray_SimpleNew(1, &k, NPY_DOUBLE),
-                        PyArray_SimpleNew(2, dims_r, NPY_DOUBLE), PyArray_SimpleNew(1, &k, NPY_BOOL),
-                        PyArray_SimpleNew(1, &k, NPY_DOUBLE), NULL, NULL, NULL, NULL};
-    for (int j = 5; j < outputs; ++j)
+    int outputs = densities ? 5 : 2;
+    PyObject *out[5] = {PyArray_SimpleNew(2, dims, NPY_DOUBLE), PyArray_SimpleNew(2, dims_r, NPY_DOUBLE), NULL, NULL,
+                        NULL};
+    for (int j = 2; j < outputs; ++j)
         out[j] = PyArray_SimpleNew(1, &k, NPY_DOUBLE);
     if (!ps_outputs_allocated(out, outputs))
         return NULL;
@@ -141,15 +141,11 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
     const double *q = densities ? (const double *)PyArray_DATA(da[D_Q]) : NULL,
                  *q_rev = densities ? (const double *)PyArray_DATA(da[D_Q_REV]) : NULL,
                  *g_prev = densities ? (const double *)PyArray_DATA(da[D_G_PREV]) : NULL;
-    double *sent = (double *)PyArray_DATA((PyArrayObject *)out[0]),
-           *pdf = (double *)PyArray_DATA((PyArrayObject *)out[1]),
-           *raster = (double *)PyArray_DATA((PyArrayObject *)out[2]),
-           *cosine = (double *)PyArray_DATA((PyArrayObject *)out[4]);
-    double *pt_rev = densities ? (double *)PyArray_DATA((PyArrayObject *)out[5]) : NULL,
-           *qs_minus_rev = densities ? (double *)PyArray_DATA((PyArrayObject *)out[6]) : NULL,
-           *cos_y = densities ? (double *)PyArray_DATA((PyArrayObject *)out[7]) : NULL,
-           *distance2 = densities ? (double *)PyArray_DATA((PyArrayObject *)out[8]) : NULL;
-    npy_bool *inside = (npy_bool *)PyArray_DATA((PyArrayObject *)out[3]);
+    double *contribution = (double *)PyArray_DATA((PyArrayObject *)out[0]),
+           *raster = (double *)PyArray_DATA((PyArrayObject *)out[1]);
+    double *pt_rev = densities ? (double *)PyArray_DATA((PyArrayObject *)out[2]) : NULL,
+           *qs_minus_rev = densities ? (double *)PyArray_DATA((PyArrayObject *)out[3]) : NULL,
+           *qs_rev = densities ? (double *)PyArray_DATA((PyArrayObject *)out[4]) : NULL;
     npy_intp bad = -1;
     enum { BAD_VERTEX, BAD_LIGHT, BAD_MATERIAL } why = BAD_VERTEX;
     Py_BEGIN_ALLOW_THREADS
@@ -159,17 +155,16 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
             bad = j, why = BAD_VERTEX;
             break;
         }
-        double x[3], w[3], at[2], value[CHANNELS], pdf_fwd, pdf_back = 0.0;
+        double x[3], w[3], at[2], value[CHANNELS], pdf, cos_lens, pdf_fwd, pdf_back = 0.0;
         float n[3];
         int on_film;
         for (int c = 0; c < 3; ++c) {
             x[c] = (double)p[c * v + i];
             n[c] = nn[c * v + i];
         }
-        double dist2 = ps_join_pinhole(&cam, x, w, pdf + j, at, &on_film, cosine + j);
+        double dist2 = ps_join_pinhole(&cam, x, w, &pdf, at, &on_film, &cos_lens);
         raster[j] = at[0];
         raster[k + j] = at[1];
-        inside[j] = (npy_bool)on_film;
         double cos_w = ((double)n[0] * w[0] + (double)n[1] * w[1]) + (double)n[2] * w[2]; /* vecmath.dot */
         double cos_at = n[0] != 0.0f || n[1] != 0.0f || n[2] != 0.0f ? fabs(cos_w) : 1.0; /* subpaths.cos_at */
         if (on_light[j]) {
@@ -200,13 +195,15 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
             if (densities)
                 pdf_back = reverse_pdf(technique, n, w, back);
         }
+        double cos2 = cos_lens * cos_lens;
+        double we = on_film ? 1.0 / (importance_scale * (cos2 * cos2)) : 0.0;
+        int seen = on_film && we > 0.0 && pdf > 0.0;
         for (int c = 0; c < CHANNELS; ++c)
-            sent[c * k + j] = beta[c * v + i] * value[c];
+            contribution[c * k + j] = seen ? beta[c * v + i] * value[c] * (we / pdf) : 0.0;
         if (densities) {
-            pt_rev[j] = dist2 > 0.0 ? pdf_fwd * q[i] * fabs(cosine[j]) / dist2 : 0.0;
+            pt_rev[j] = dist2 > 0.0 ? pdf_fwd * q[i] * fabs(cos_lens) / dist2 : 0.0;
             qs_minus_rev[j] = pdf_back * q_rev[i] * g_prev[i];
-            cos_y[j] = cos_at;
-            distance2[j] = dist2;
+            qs_rev[j] = dist2 > 0.0 ? we * lens_area * fabs(cos_lens) * cos_at / dist2 : 0.0;
         }
     }
     Py_END_ALLOW_THREADS
@@ -223,6 +220,6 @@ PyObject *ps_lens_connect(PyObject *module, PyObject *args)
         return NULL;
     }
     if (densities)
-        return Py_BuildValue("(NNNNNNNNN)", out[0], out[1], out[2], out[3], out[4], out[5], out[6], out[7], out[8]);
-    return Py_BuildValue("(NNNNN)", out[0], out[1], out[2], out[3], out[4]);
+        return Py_BuildValue("(NNNNN)", out[0], out[1], out[2], out[3], out[4]);
+    return Py_BuildValue("(NN)", out[0], out[1]);
 }

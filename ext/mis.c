@@ -261,25 +261,8 @@ PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs)
         PyErr_SetString(PyExc_ValueError, "mis_weights: subpath arrays disagree with their offsets");
         goto done;
     }
-    /* Every lane's vertices must lie within the arrays: offsets start at 0 and never decrease. */
-    for (npy_intp j = 0; j <= lanes; ++j) {
-        int broken = j == 0 ? loff[0] != 0 || eoff[0] != 0 : loff[j] < loff[j - 1] || eoff[j] < eoff[j - 1];
-        if (broken) {
-            PyErr_Format(PyExc_ValueError, "mis_weights: light_offset and eye_offset must start at 0 and never "
-                         "decrease (entry %zd breaks this)", (Py_ssize_t)j);
-            goto done;
-        }
-    }
     const int32_t *s = (const int32_t *)PyArray_DATA(a[0]), *t = (const int32_t *)PyArray_DATA(a[1]);
     const int64_t *lane = (const int64_t *)PyArray_DATA(a[2]);
-    for (npy_intp m = 0; m < m_count; ++m) {
-        if (lane[m] < 0 || lane[m] >= lanes || s[m] < 0 || t[m] < 0 || (int64_t)s[m] + t[m] < 2 ||
-            s[m] - 1 > loff[lane[m] + 1] - loff[lane[m]] || t[m] - 1 > eoff[lane[m] + 1] - eoff[lane[m]]) {
-            PyErr_Format(PyExc_ValueError, "mis_weights: connection %zd (lane %lld, s=%d, t=%d) does not fit its "
-                         "subpaths", (Py_ssize_t)m, (long long)lane[m], s[m], t[m]);
-            goto done;
-        }
-    }
     npy_intp dims[1] = {m_count};
     result = PyArray_SimpleNew(1, dims, NPY_DOUBLE);
     if (result == NULL)
@@ -298,10 +281,38 @@ PyObject *ps_mis_weights(PyObject *module, PyObject *args, PyObject *kwargs)
         {allowed ? PyArray_STRIDE(allowed, 0) : 0, allowed ? PyArray_STRIDE(allowed, 1) : 0},
         (double *)PyArray_DATA((PyArrayObject *)result),
     };
+    /* The checks read every offset and connection, so they run with the GIL released too (another render thread
+     * has it meanwhile); the first offset or connection that breaks them is reported once it is taken back. */
+    npy_intp broken_offset = -1, broken_connection = -1;
     Py_BEGIN_ALLOW_THREADS
-    for (npy_intp m = 0; m < m_count; ++m)
-        b.out[m] = weight_of(&b, m);
+    /* Every lane's vertices must lie within the arrays: offsets start at 0 and never decrease. */
+    for (npy_intp j = 0; j <= lanes; ++j) {
+        if (j == 0 ? loff[0] != 0 || eoff[0] != 0 : loff[j] < loff[j - 1] || eoff[j] < eoff[j - 1]) {
+            broken_offset = j;
+            break;
+        }
+    }
+    for (npy_intp m = 0; broken_offset < 0 && m < m_count; ++m) {
+        if (lane[m] < 0 || lane[m] >= lanes || s[m] < 0 || t[m] < 0 || (int64_t)s[m] + t[m] < 2 ||
+            s[m] - 1 > loff[lane[m] + 1] - loff[lane[m]] || t[m] - 1 > eoff[lane[m] + 1] - eoff[lane[m]]) {
+            broken_connection = m;
+            break;
+        }
+    }
+    if (broken_offset < 0 && broken_connection < 0)
+        for (npy_intp m = 0; m < m_count; ++m)
+            b.out[m] = weight_of(&b, m);
     Py_END_ALLOW_THREADS
+    if (broken_offset >= 0) {
+        PyErr_Format(PyExc_ValueError, "mis_weights: light_offset and eye_offset must start at 0 and never "
+                     "decrease (entry %zd breaks this)", (Py_ssize_t)broken_offset);
+        Py_CLEAR(result);
+    } else if (broken_connection >= 0) {
+        npy_intp m = broken_connection;
+        PyErr_Format(PyExc_ValueError, "mis_weights: connection %zd (lane %lld, s=%d, t=%d) does not fit its "
+                     "subpaths", (Py_ssize_t)m, (long long)lane[m], s[m], t[m]);
+        Py_CLEAR(result);
+    }
 done:
     for (int k = 0; k < 18; ++k)
         Py_XDECREF(a[k]);

@@ -104,10 +104,10 @@ static PyMethodDef module_methods[] = {
      "sample and roulette in one pass (see ext/pt_vertex.c and pathspace.estimators.pt_fused)."},
     {"lens_connect", ps_lens_connect, METH_VARARGS,
      "lens_connect(p, n, wo, beta, material, entity, chosen, on_light, diffuse, reflectance, radiance, two_sided, "
-     "position, forward, right, image_up, tan_x, tan_y, width, height, lens_area, technique, q, q_rev, g_prev)\n--"
-     "\n\n(sent (3, K), pdf, raster (2, K), on_film, cos[, pt_rev, qs_minus_rev, cos_y, dist2]): light vertices "
-     "`chosen` joined to a pinhole camera, beta times what each sends toward it, and with q, q_rev and g_prev (not "
-     "None) the MIS densities (see ext/lens_connect.c and pathspace.estimators.lens_fused)."},
+     "position, forward, right, image_up, tan_x, tan_y, width, height, lens_area, importance_scale, technique, q, "
+     "q_rev, g_prev)\n--\n\n(value (3, K), raster (2, K)[, pt_rev, qs_minus_rev, qs_rev]): light vertices `chosen` "
+     "joined to a pinhole camera (image area x lens area `importance_scale`), their contributions, and with q, "
+     "q_rev and g_prev (not None) the MIS densities (see ext/lens_connect.c and pathspace.estimators.lens_fused)."},
     {"join_vertices", ps_join_vertices, METH_VARARGS,
      "join_vertices(light p, n, wo, beta, material, q, q_rev, g_prev, camera p, n, wo, beta, material, q, q_rev, "
      "g_prev, y, z, diffuse, reflectance, technique)\n--\n\n(value (3, K), qs_rev, qs_minus_rev, pt_rev, "

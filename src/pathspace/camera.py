@@ -185,14 +185,15 @@ class PinholeCamera:
     def importance_of(self, cos: np.ndarray, on_film: np.ndarray) -> np.ndarray:
         """We from the cosine ``cos`` (N,) between directions leaving the lens and the axis, where ``on_film``;
         else 0."""
+        cos2 = cos * cos   # cos^4 as two products: NumPy's power calls libm per element, ~20x slower
         with np.errstate(divide="ignore", invalid="ignore"):
-            return np.where(on_film, 1.0 / (self.image_area * self.lens_area * cos ** 4), 0.0)
+            return np.where(on_film, 1.0 / (self.image_area * self.lens_area * (cos2 * cos2)), 0.0)
 
     def pdf_direction(self, directions: np.ndarray, lens_points: np.ndarray | None = None) -> np.ndarray:
         """Solid-angle density 1 / (A cos^3 theta) of primary-ray directions (0 off the film)."""
         cos = self.cos_to_axis(directions)
         with np.errstate(divide="ignore", invalid="ignore"):
-            value = 1.0 / (self.image_area * cos ** 3)
+            value = 1.0 / (self.image_area * (cos * cos * cos))
         return np.where(self._on_film(directions, lens_points), value, 0.0)
 
     def _on_film(self, directions: np.ndarray, lens_points: np.ndarray | None) -> np.ndarray:

@@ -159,7 +159,8 @@ def kernel_args(k: int = 3, densities: bool = False):
     return [*vectors, np.ones((3, v)), np.zeros(v, np.int64), np.zeros(v, np.int64), np.arange(k, dtype=np.int64),
             np.zeros(k, bool), fused.diffuse, fused.reflectance, fused.radiance, fused.two_sided, camera.position,
             camera.forward, camera.right, camera.image_up, camera.tan_half[0], camera.tan_half[1], camera.width,
-            camera.height, camera.lens_area, 0, *([np.ones(v)] * 3 if densities else [None] * 3)]
+            camera.height, camera.lens_area, camera.image_area * camera.lens_area, 0,
+            *([np.ones(v)] * 3 if densities else [None] * 3)]
 
 
 @pytest.mark.parametrize("position, value, error, match", [
@@ -173,9 +174,9 @@ def kernel_args(k: int = 3, densities: bool = False):
     (10, np.ones((3, 1)), ValueError, "must agree"),
     (3, np.ones((3, 4), np.float32), TypeError, "beta"),
     (12, np.ones(2), ValueError, "position must have 3 entries"),
-    (21, 2, ValueError, "technique must be 0 .cosine. or 1 .uniform., got 2"),
-    (22, np.ones(4), ValueError, "q, q_rev and g_prev must all be None or all"),
-    (24, np.ones(4), ValueError, "q, q_rev and g_prev must all be None or all"),
+    (22, 2, ValueError, "technique must be 0 .cosine. or 1 .uniform., got 2"),
+    (23, np.ones(4), ValueError, "q, q_rev and g_prev must all be None or all"),
+    (25, np.ones(4), ValueError, "q, q_rev and g_prev must all be None or all"),
 ])
 def test_lens_connect_refuses_bad_arguments(position, value, error, match):
     args = kernel_args()
@@ -193,10 +194,10 @@ def test_lens_connect_refuses_a_light_vertex_off_the_emitting_triangles():
 
 
 @pytest.mark.parametrize("position, value, error, match", [
-    (22, np.ones(3), ValueError, "q, q_rev and g_prev must all be None or all"),
-    (24, np.ones(5), ValueError, "q, q_rev and g_prev must all be None or all"),
-    (23, None, ValueError, "q, q_rev and g_prev must all be None or all"),
-    (24, np.ones(4, np.float32), TypeError, "g_prev"),
+    (23, np.ones(3), ValueError, "q, q_rev and g_prev must all be None or all"),
+    (25, np.ones(5), ValueError, "q, q_rev and g_prev must all be None or all"),
+    (24, None, ValueError, "q, q_rev and g_prev must all be None or all"),
+    (25, np.ones(4, np.float32), TypeError, "g_prev"),
 ])
 def test_lens_connect_refuses_bad_densities(position, value, error, match):
     args = kernel_args(densities=True)
@@ -208,5 +209,5 @@ def test_lens_connect_refuses_bad_densities(position, value, error, match):
 @pytest.mark.parametrize("densities", [False, True])
 def test_lens_connect_takes_no_vertices(densities):
     out = _native.lens_connect(*kernel_args(0, densities))
-    assert len(out) == (9 if densities else 5)
-    assert out[0].shape == (3, 0) and out[2].shape == (2, 0) and all(a.shape == (0,) for a in out[5:])
+    assert len(out) == (5 if densities else 2)
+    assert out[0].shape == (3, 0) and out[1].shape == (2, 0) and all(a.shape == (0,) for a in out[2:])

@@ -218,12 +218,9 @@ def lens_samples(batch: Batch, light: Subpaths | None = None) -> Contributions |
                                 & batch.wanted(light.lane, light.index + 1, 1)))
     if not y.size:
         return None
-    if batch.lens_kernel is not None:   # a pinhole: beta times what y sends (and the densities) in C
+    if batch.lens_kernel is not None:   # a pinhole: the contributions (and the densities) in C
         joined = batch.lens_kernel(light, y.v, on_light.take(y.v), batch.densities)
-        we, pdf_lens = camera.importance_of(joined.cos, joined.on_film), joined.pdf
-        with np.errstate(divide="ignore", invalid="ignore"):
-            value = np.where(joined.on_film & (we > 0) & (pdf_lens > 0), joined.sent * (we / pdf_lens), 0.0)
-        raster = joined.raster
+        value, raster = joined.value, joined.raster
     else:
         joined = None
         wi, we, pdf_lens, lens, raster, valid = camera.sample_importance(y.p, y.u)
@@ -247,10 +244,8 @@ def lens_samples(batch: Batch, light: Subpaths | None = None) -> Contributions |
     y, value, raster = y.keep(useful), np.take(value, useful, axis=1), np.take(raster, useful, axis=1)
     if not batch.densities:
         return Contributions.make(y.lane, y.index + 1, 1, value, raster=raster, flags=batch.lane_flags.take(y.lane))
-    we = we[useful]
     if joined is not None:
-        pt_rev, qs_minus_rev = joined.pt_rev[useful], joined.qs_minus_rev[useful]
-        cos_lens, cos_y, dist2 = joined.cos[useful], joined.cos_at[useful], joined.dist2[useful]
+        pt_rev, qs_minus_rev, qs_rev = (getattr(joined, name)[useful] for name in ("pt_rev", "qs_minus_rev", "qs_rev"))
     else:
         wi, lens = np.take(wi, useful, axis=1), np.take(lens, useful, axis=1)
         d = lens - y.p
@@ -260,10 +255,9 @@ def lens_samples(batch: Batch, light: Subpaths | None = None) -> Contributions |
         pt_rev = to_area(pdf_fwd[useful] * y.q, axis, wi, dist2)
         # y_{s-2} as the camera walk would go on to it (nothing for s = 1: pdf_back and g_prev are 0 there).
         qs_minus_rev = _at_previous(pdf_back[useful] * y.q_rev, y)
-        cos_lens, cos_y = camera.cos_to_axis(-wi), cos_at(y.n, wi)
-    # qs = y_{s-1} as the camera walk would reach it from the lens point: the direction's density
-    # 1 / (A cos^3) is We lens_area cos (see pathspace.camera).
-    qs_rev = area_density(we * camera.lens_area * np.abs(cos_lens), cos_y, dist2)
+        # qs = y_{s-1} as the camera walk would reach it from the lens point: the direction's density
+        # 1 / (A cos^3) is We lens_area cos (see pathspace.camera).
+        qs_rev = area_density(we[useful] * camera.lens_area * np.abs(camera.cos_to_axis(-wi)), cos_at(y.n, wi), dist2)
     return Contributions.make(y.lane, y.index + 1, 1, value, raster=raster, qs_fwd=y.fwd, qs_rev=qs_rev,
                               qs_minus_rev=qs_minus_rev, pt_fwd=np.full(y.size, 1.0 / camera.lens_area),
                               pt_rev=pt_rev, flags=batch.lane_flags.take(y.lane))

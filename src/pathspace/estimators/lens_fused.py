@@ -16,8 +16,7 @@ the NumPy code does (which stays the reference and serves every other case):
   non-specular ones, so diffuse).
 
 With MIS densities (BDPT), the kernel also gives those the connection
-changes, but for the camera's density at the vertex, which needs the
-camera's importance (see :class:`LensJoin`).  Area lights are the first
+changes (see :class:`LensJoin`).  Area lights are the first
 entities of a scene's lights, so a vertex on a light indexes the emitting
 triangles' tables by its entity.
 
@@ -40,21 +39,16 @@ __all__ = ["LensJoin", "LensKernel", "lens_kernel"]
 
 @dataclass
 class LensJoin:
-    """What ``ext/lens_connect.c`` gives for K light vertices joined to the pinhole: beta times what each
-    ``sent`` toward it (3, K), the pinhole's solid-angle density ``pdf`` at it, its ``raster`` position (2, K),
-    whether that is ``on_film``, the cosine ``cos`` at the lens; with densities (else None), the MIS densities
-    ``pt_rev`` and ``qs_minus_rev`` (see :class:`~pathspace.mis.Connections`), and the vertex's ``cos_at`` and
-    squared distance ``dist2`` to the pinhole, which turn the camera's density into area measure there."""
+    """What ``ext/lens_connect.c`` gives for K light vertices joined to the pinhole: the contribution ``value``
+    (3, K) -- beta times what each sends toward it, times the camera's importance over the pinhole's density, 0
+    off the film -- and its ``raster`` position (2, K); with densities (else None), the MIS densities ``pt_rev``,
+    ``qs_minus_rev`` and ``qs_rev`` (see :class:`~pathspace.mis.Connections`)."""
 
-    sent: np.ndarray
-    pdf: np.ndarray
+    value: np.ndarray
     raster: np.ndarray
-    on_film: np.ndarray
-    cos: np.ndarray
     pt_rev: np.ndarray | None = None
     qs_minus_rev: np.ndarray | None = None
-    cos_at: np.ndarray | None = None
-    dist2: np.ndarray | None = None
+    qs_rev: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -82,7 +76,7 @@ class LensKernel:
             *vertices, np.ascontiguousarray(chosen, np.int64), np.ascontiguousarray(on_light), self.diffuse,
             self.reflectance, self.radiance, self.two_sided, camera.position, camera.forward, camera.right,
             camera.image_up, camera.tan_half[0], camera.tan_half[1], camera.width, camera.height, camera.lens_area,
-            self.technique, *densities))
+            camera.image_area * camera.lens_area, self.technique, *densities))
 
 
 def lens_kernel(scene, colours, options: dict, kernel: str) -> tuple[LensKernel | None, str]:

@@ -91,6 +91,11 @@ LIGHT_SELECTION = "power"
 # ``densities``): q, and the previous vertex's normal and whether it is at infinity.
 _WALK_FIELDS = WALK_FIELDS + ("lane",)
 _DENSITY_WALK_FIELDS = ("q", "prev_n", "prev_infinite")
+# What _Recorder.add gives the fields it is not given: (leading shape, dtype, value) -- an off-surface vertex.
+_DEFAULTS = {"eps": ((), np.float32, 0.0), "wo": ((3,), np.float32, 0.0), "material": ((), np.int64, -1),
+             "entity": ((), np.int64, -1), "infinite": ((), bool, False), "delta": ((), bool, False),
+             "rev": ((), np.float64, 0.0), "g_prev": ((), np.float64, 0.0), "q": ((), np.float64, 1.0),
+             "q_rev": ((), np.float64, 1.0)}
 STREAM_CHUNK = 16384  # the fewest vertices stream_light_vertices hands over at once (but vertices 0 and the last)
 
 
@@ -296,12 +301,10 @@ class _Recorder:
         light, q = 1) with nothing before it (``wo``, ``g_prev`` zero)."""
         count = lanes.size
         record = dict(lane=lanes, index=np.full(count, index, dtype=np.int64), kind=np.full(count, kind, dtype=np.int8),
-                      eps=np.zeros(count, np.float32), wo=np.zeros((3, count), np.float32),
-                      material=np.full(count, -1, np.int64), entity=np.full(count, -1, np.int64),
-                      infinite=np.zeros(count, bool), delta=np.zeros(count, bool))
-        if self.densities:
-            record.update(rev=np.zeros(count), g_prev=np.zeros(count), q=np.ones(count), q_rev=np.ones(count))
-        record.update(fields)
+                      **fields)
+        for name, (shape, dtype, value) in _DEFAULTS.items():
+            if name not in record and (self.densities or name not in DENSITY_FIELDS):
+                record[name] = np.full((*shape, count), value, dtype)
         if self.consume is None:
             self.records.append(record)
         else:
