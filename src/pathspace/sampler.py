@@ -108,6 +108,8 @@ class StreamSampler:
 
     def draw(self, k: int) -> np.ndarray:
         """k uniform numbers in [0, 1) for every live lane, shape (k, lanes)."""
+        if len(self.generators) == 1:
+            return self.generators[0].random((k, self.unit.size))
         live = np.flatnonzero(self.counts)
         if live.size == 1:
             return self.generators[live[0]].random((k, self.lanes))
@@ -121,6 +123,10 @@ class StreamSampler:
 
     def keep(self, indices: np.ndarray) -> None:
         """Only the lanes at ``indices`` (increasing, of the current live lanes) stay alive."""
+        if len(self.generators) == 1:   # one segment (a work item's walk, mostly): no lookups, a few us a bounce
+            self.unit = self.unit[:len(indices)]
+            self.counts = np.array([self.unit.size], dtype=np.int64)
+            return
         self.unit = self.unit.take(indices)
         self.counts = self._counts(self.unit)
         if len(self.generators) > 8 and np.count_nonzero(self.counts) < len(self.generators) // 2:

@@ -199,10 +199,12 @@ class PathTracer(Estimator):
     def render_items(self, job: RenderJob, next_item: Callable[[], WorkItem | None],
                      counters: Counters) -> Iterator[ItemResult]:
         """Render work items on one persistent wavefront: new items join whenever fewer than ``REFILL``
-        paths are alive, and an item is yielded as soon as its last path ends."""
+        paths are alive, and an item is yielded as soon as its last path ends.  Refused an item (a time budget's
+        deadline, see :mod:`~pathspace.estimators.passes`), the wavefront drains and asks once more: an item
+        rendered alone ends sooner than one queued behind others, and may still fit."""
         bounce = self._bounce_context(job.scene, job.mode, counters)
         walk = deep = None
-        exhausted = False
+        exhausted = asked_drained = False
         while True:
             job.control.check()
             while not exhausted and (walk is None or walk.size < REFILL):
@@ -210,6 +212,7 @@ class PathTracer(Estimator):
                 if item is None:
                     exhausted = True
                     break
+                asked_drained = False
                 new = self._start(bounce, item.pixels, job.samplers.open(item.keys, item.counts),
                                   bounce.book.open(item, item.pixels.size))
                 if walk is None:
@@ -217,7 +220,10 @@ class PathTracer(Estimator):
                 else:
                     walk.extend(new)
             if walk is None or not (walk.size or (deep is not None and deep.size)):
-                break
+                if walk is None or asked_drained:
+                    break
+                exhausted, asked_drained = False, True
+                continue
             deep = self._advance(walk, deep, bounce)
             counters.rays += walk.rays + deep.rays
             walk.rays = deep.rays = 0

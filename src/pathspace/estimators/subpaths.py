@@ -354,12 +354,13 @@ class _Growth:
                         break
             hits = walk.trace()
             hit = hits.prim >= 0
+            every_hit = bool(hit.all())
             if self.lens_hits is not None:
                 self._through_lens(hits.t)
-            if self.escapes and not hit.all():
+            if self.escapes and not every_hit:
                 self._at_infinity(np.flatnonzero(~hit))
             prim, b1, b2, t = hits.prim, hits.u, hits.v, hits.t
-            if not hit.all():
+            if not every_hit:
                 prim, b1, b2, t = walk.keep(np.flatnonzero(hit), prim, b1, b2, t)
                 if not walk.size:
                     break
