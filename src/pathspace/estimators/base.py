@@ -254,6 +254,7 @@ class Estimator(ABC):
 
     def render_items(self, job: RenderJob, next_item: Callable[[], WorkItem | None],
                      counters: Counters) -> Iterator[ItemResult]:
-        """Render the items ``next_item()`` hands out (None: no more) on one worker, yielding their
-        results as they finish; count into ``counters``."""
+        """Render the items ``next_item()`` hands out (None: no more for now -- a worker refused under a time
+        budget may ask again once its work in flight is done) on one worker, yielding their results as they
+        finish; count into ``counters``."""
         raise NotImplementedError(f"{type(self).__name__} renders with its own loop; it has no work items")
