@@ -108,8 +108,6 @@ class StreamSampler:
 
     def draw(self, k: int) -> np.ndarray:
         """k uniform numbers in [0, 1) for every live lane, shape (k, lanes)."""
-        if len(self.generators) == 1:
-            return self.generators[0].random((k, self.unit.size))
         live = np.flatnonzero(self.counts)
         if live.size == 1:
             return self.generators[live[0]].random((k, self.lanes))
