@@ -187,22 +187,24 @@ PyObject *ps_splat_add(PyObject *module, PyObject *args)
         return NULL;
     }
     const int64_t *pixel = (const int64_t *)PyArray_DATA(pixels);
-    for (npy_intp i = 0; i < n; ++i)
-        if (pixel[i] < 0 || pixel[i] >= size) {
-            PyErr_Format(PyExc_IndexError, "splat_add: pixel %lld of splat %zd is outside the film's 0 .. %zd",
-                         (long long)pixel[i], (Py_ssize_t)i, (Py_ssize_t)(size - 1));
-            return NULL;
-        }
     double *out = (double *)PyArray_DATA(buffer);
     const double *x = (const double *)PyArray_DATA(values);
-    npy_intp row = PyArray_STRIDE(values, 0) / (npy_intp)sizeof(double);
+    npy_intp row = PyArray_STRIDE(values, 0) / (npy_intp)sizeof(double), bad = -1;
     Py_BEGIN_ALLOW_THREADS
-    for (npy_intp c = 0; c < channels; ++c) {
+    for (npy_intp i = 0; i < n && bad < 0; ++i)
+        if (pixel[i] < 0 || pixel[i] >= size)
+            bad = i;
+    for (npy_intp c = 0; c < channels && bad < 0; ++c) {
         double *film = out + c * size;
         const double *splat = x + c * row;
         for (npy_intp i = 0; i < n; ++i)
             film[pixel[i]] += splat[i];
     }
     Py_END_ALLOW_THREADS
+    if (bad >= 0) {
+        PyErr_Format(PyExc_IndexError, "splat_add: pixel %lld of splat %zd is outside the film's 0 .. %zd",
+                     (long long)pixel[bad], (Py_ssize_t)bad, (Py_ssize_t)(size - 1));
+        return NULL;
+    }
     Py_RETURN_NONE;
 }

@@ -11,7 +11,7 @@ import pytest
 
 import pathspace as ps
 from pathspace.estimators import ESTIMATORS
-from pathspace.estimators.base import Estimator, ItemResult
+from pathspace.estimators.base import Estimator, ItemResult, WorkItem
 from pathspace.estimators.passes import TIMED_FIRST_LANES
 from conftest import scene_dict
 
@@ -225,3 +225,13 @@ def test_timed_items_grow_while_short_and_shrink_when_long():
     assert size.layout() == (4096, 1)
     assert _TimedItemSize(1.0, 4096, first=50_000, largest=8192).layout() == (4096, 2)
     assert _TimedItemSize(1.0, 10_000, first=4096, largest=8192).layout() == (3334, 1)  # equal tiles
+
+
+def test_pass_of_gives_every_lane_its_pass():
+    """A work item's lanes run unit after unit (a pass of its tile each): lane k is in pass passes[k // tile]."""
+    item = WorkItem(0, range(5, 8), tile=2, pixel_start=10, pixel_stop=14)
+    lanes = np.array([0, 3, 4, 7, 8, 11])
+    assert item.pass_of(lanes).tolist() == [5, 5, 6, 6, 7, 7]
+    assert item.pass_of(np.arange(12)).tolist() == np.repeat([5, 6, 7], 4).tolist()
+    single = WorkItem(1, range(9, 10), tile=0, pixel_start=0, pixel_stop=4)
+    assert single.pass_of(np.array([0, 3])) == 9   # one pass: an int, not a gather per splat

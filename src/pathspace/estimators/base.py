@@ -84,18 +84,20 @@ class WorkItem:
         """Pixel index of every lane: the tile's pixels, once per pass."""
         return np.tile(np.arange(self.pixel_start, self.pixel_stop, dtype=np.int64), len(self.passes))
 
-    @property
-    def lane_pass(self) -> np.ndarray:
-        """Pass of every lane."""
-        return np.repeat(np.asarray(self.passes, dtype=np.int64), self.pixel_stop - self.pixel_start)
+    def pass_of(self, lanes: np.ndarray) -> int | np.ndarray:
+        """The pass of each of ``lanes`` (lane indices): the item's pass if it has one (an int: a render of
+        more pixels than an item's lanes, or one at 1 spp per item), else an array like ``lanes``."""
+        if len(self.passes) == 1:
+            return self.passes[0]
+        return np.asarray(self.passes, dtype=np.int64).take(np.asarray(lanes) // (self.pixel_stop - self.pixel_start))
 
 
 @dataclass
 class Splats:
     """Contributions that land anywhere on the film: ``value`` (3, n) film values at ``pixel`` (n,) in
-    pass ``pass_index`` (n,)."""
+    pass ``pass_index``: one for all (an int), or one per splat (n,)."""
 
-    pass_index: np.ndarray
+    pass_index: int | np.ndarray
     pixel: np.ndarray
     value: np.ndarray
 
@@ -135,7 +137,7 @@ class ItemResult:
     """What a work item gives the film.
 
     ``samples`` (3, lanes): lane k's film value, the sample of pixel
-    ``item.pixels[k]`` in pass ``item.lane_pass[k]``; ``splats``: what
+    ``item.pixels[k]`` in pass ``item.pass_of(k)``; ``splats``: what
     lands elsewhere; ``layers``: per-strategy contributions by layer name
     (own-pixel ones included, as splats).
     """

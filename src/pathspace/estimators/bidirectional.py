@@ -172,7 +172,6 @@ class Bidirectional(Estimator):
         units = np.arange(0, count + 1, item.pixel_stop - item.pixel_start)
         batch, state = self._subpaths(scene, mode, item.pixels, samplers, units, counters, job.control)
         own = np.zeros((batch.colours.channels, count))
-        lane_pass = item.lane_pass
         for part in self._contributions(batch):
             job.control.check()
             _, weighted, pixel, splat = self._weighted(part, batch, item.pixels)
@@ -184,10 +183,10 @@ class Bidirectional(Estimator):
                     own[c] += np.bincount(lane, weights=values[c], minlength=count)
             if mine.size < part.count:
                 on = np.flatnonzero(splat)
-                result.splats.append(Splats(lane_pass.take(part.lane[on]), pixel[on],
+                result.splats.append(Splats(item.pass_of(part.lane[on]), pixel[on],
                                             mode.to_film(np.take(weighted, on, axis=1), state, part.lane[on])))
             if self.pyramid:
-                self._record_strategies(result.layers, part, weighted, pixel, mode, state, lane_pass)
+                self._record_strategies(result.layers, part, weighted, pixel, mode, state, item)
         counters.rays += batch.rays
         counters.nonfinite_contributions += batch.nonfinite
         result.samples = mode.to_film(own, state, np.arange(count))
@@ -273,7 +272,7 @@ class Bidirectional(Estimator):
         return weights, part.value * weights[None, :], pixel, splat
 
     def _record_strategies(self, layers: dict, part: Contributions, weighted: np.ndarray, film_pixel, mode,
-                           state, lane_pass: np.ndarray) -> None:
+                           state, item: WorkItem) -> None:
         """Unweighted and weighted contributions per strategy (s, t) of paths up to ``pyramid`` segments, as
         splats into the layers ``s{s}t{t}.unweighted`` and ``s{s}t{t}.weighted``."""
         length = part.s + part.t - 1
@@ -282,5 +281,5 @@ class Bidirectional(Estimator):
             lanes = part.lane.take(pick)
             for kind, value in (("unweighted", part.value), ("weighted", weighted)):
                 film = mode.to_film(np.take(value, pick, axis=1), state, lanes)
-                layers.setdefault(f"s{s}t{t}.{kind}", []).append(Splats(lane_pass.take(lanes), film_pixel.take(pick),
+                layers.setdefault(f"s{s}t{t}.{kind}", []).append(Splats(item.pass_of(lanes), film_pixel.take(pick),
                                                                         film))

@@ -110,6 +110,7 @@ class Walk:
         self.scene, self.lanes, self.sampler = scene, lanes, sampler
         self.roulette, self.dims, self.transport = roulette, dims, transport
         self.rays = 0
+        self._mis_survival: dict[RussianRoulette, np.ndarray] = {}   # q of every material, per roulette
         if roulette.policy == "throughput" and transport == "radiance" and "eta_scale" not in lanes.fields:
             lanes.add("eta_scale", np.ones(lanes.size))  # the product of eta^2 over the refractions so far
 
@@ -175,8 +176,13 @@ class Walk:
     def mis_survival(self, hit: Arrival, roulette: RussianRoulette | None = None) -> np.ndarray:
         """q at ``hit`` as multiple importance sampling sees it (N,), under this walk's roulette or another
         (the opposite walk's; see :meth:`pathspace.roulette.RussianRoulette.mis_survival`)."""
-        return (roulette or self.roulette).mis_survival(self.scene.materials.albedo.take(hit.material),
-                                                        self._specular(hit))
+        roulette = roulette or self.roulette
+        per_material = self._mis_survival.get(roulette)
+        if per_material is None:   # q depends on the material alone: once per material, then one gather a vertex
+            materials = self.scene.materials
+            per_material = self._mis_survival[roulette] = roulette.mis_survival(
+                materials.albedo, materials.delta if materials.delta.any() else None)
+        return per_material.take(hit.material)
 
     def _specular(self, hit: Arrival) -> np.ndarray | None:
         """Whether the material at each of ``hit``'s lanes is specular (delta), or None if the scene has none."""
