@@ -163,18 +163,19 @@ class Bidirectional(Estimator):
 
     def _render_item(self, job: RenderJob, item: WorkItem, counters: Counters) -> ItemResult:
         scene, mode = job.scene, job.mode
-        count = item.pixels.size
+        pixels = item.pixels
+        count = pixels.size
         result = ItemResult(item, np.zeros((3, count)))
         if not scene.lights.count:
             return result
         samplers = {name: job.samplers.open([key + (code,) for key in item.keys], item.counts)
                     for name, code in STREAMS.items()}
         units = np.arange(0, count + 1, item.pixel_stop - item.pixel_start)
-        batch, state = self._subpaths(scene, mode, item.pixels, samplers, units, counters, job.control)
+        batch, state = self._subpaths(scene, mode, pixels, samplers, units, counters, job.control)
         own = np.zeros((batch.colours.channels, count))
         for part in self._contributions(batch):
             job.control.check()
-            _, weighted, pixel, splat = self._weighted(part, batch, item.pixels)
+            _, weighted, pixel, splat = self._weighted(part, batch, pixels)
             mine = np.flatnonzero(~splat)
             if mine.size:
                 lane, values = ((part.lane, weighted) if mine.size == part.count
