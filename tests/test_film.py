@@ -212,6 +212,14 @@ def test_splats_join_their_pass_in_arrival_order():
     np.testing.assert_array_equal(film.sum[0], [6.0, 7.0, 11.0])  # pixel 0 of pass 2: 2 + (0.1 + 1e16 - 1e16)
 
 
+def test_no_splats_open_no_pass():
+    """Adding no splats, to a pass given as one int or per splat, opens neither the pass nor a layer."""
+    film = Film(3, 1, channels=1)
+    film.add_splats(4, np.array([], dtype=np.int64), np.zeros((1, 0)), layer="s1t1.weighted")
+    film.add_splats(np.array([], dtype=np.int64), np.array([], dtype=np.int64), np.zeros((1, 0)))
+    assert not film.incomplete_passes and not film.layers
+
+
 def test_film_survives_pickling_mid_pass():
     """A film pickled with a pass open (as a resume file stores it) continues bit for bit."""
     rng = np.random.default_rng(3)

@@ -307,7 +307,7 @@ class Film:
             raise ValueError(f"splat values of shape {values.shape} for {pixels.size} pixels; expected "
                              f"({self.channels}, {pixels.size})")
         pass_index = np.asarray(pass_index, dtype=np.int64)
-        if not pass_index.size:
+        if not pixels.size or not pass_index.size:   # nothing to add: no pass or layer is opened
             return
         if pass_index.ndim == 0 or pass_index.min() == pass_index.max():  # one pass (the usual case)
             self._scatter(int(pass_index.flat[0]), layer, pixels, values)

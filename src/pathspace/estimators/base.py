@@ -85,8 +85,8 @@ class WorkItem:
         return np.tile(np.arange(self.pixel_start, self.pixel_stop, dtype=np.int64), len(self.passes))
 
     def pass_of(self, lanes: np.ndarray) -> int | np.ndarray:
-        """The pass of each of ``lanes`` (lane indices): the item's pass if it has one (an int: a render of
-        more pixels than an item's lanes, or one at 1 spp per item), else an array like ``lanes``."""
+        """The pass of each of ``lanes`` (lane indices, an array): an item of one pass gives that pass as an int
+        (whatever ``lanes``), an item of several an int64 array like ``lanes``."""
         if len(self.passes) == 1:
             return self.passes[0]
         return np.asarray(self.passes, dtype=np.int64).take(np.asarray(lanes) // (self.pixel_stop - self.pixel_start))
@@ -137,7 +137,7 @@ class ItemResult:
     """What a work item gives the film.
 
     ``samples`` (3, lanes): lane k's film value, the sample of pixel
-    ``item.pixels[k]`` in pass ``item.pass_of(k)``; ``splats``: what
+    ``item.pixels[k]`` in pass ``item.passes[k // tile width]``; ``splats``: what
     lands elsewhere; ``layers``: per-strategy contributions by layer name
     (own-pixel ones included, as splats).
     """
