@@ -280,7 +280,7 @@ class Bidirectional(Estimator):
         for s, t in {(int(a), int(b)) for a, b in zip(part.s[length <= self.pyramid], part.t[length <= self.pyramid])}:
             pick = np.flatnonzero((part.s == s) & (part.t == t))
             lanes = part.lane.take(pick)
+            passes, pixels = item.pass_of(lanes), film_pixel.take(pick)   # shared by both layers (read only)
             for kind, value in (("unweighted", part.value), ("weighted", weighted)):
                 film = mode.to_film(np.take(value, pick, axis=1), state, lanes)
-                layers.setdefault(f"s{s}t{t}.{kind}", []).append(Splats(item.pass_of(lanes), film_pixel.take(pick),
-                                                                        film))
+                layers.setdefault(f"s{s}t{t}.{kind}", []).append(Splats(passes, pixels, film))
